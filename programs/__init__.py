@@ -1,0 +1,1 @@
+"""Scan programs shipped with softplc: the thesis's case studies as reusable examples."""

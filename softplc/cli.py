@@ -1,0 +1,314 @@
+"""The `softplc` command line: a thin layer over the runtime and its adapters.
+
+Core commands live here (run, check, tags, schema). Adapters and tools add their own
+subcommands through modules listed in COMMAND_MODULES: each defines
+`add_commands(subparsers)` and sets `func` on its parsers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import csv
+import importlib
+import json
+import logging
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+from softplc import __version__
+from softplc.clock import RealClock, SimClock
+from softplc.config import PlantConfig, load_config
+from softplc.durations import format_duration
+from softplc.expression import Condition, ExpressionError
+from softplc.schema import CONFIG_SCHEMA
+from softplc.yamlsource import ConfigError
+
+EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
+DEFAULT_CONFIG = "tagdb.yaml"
+
+# Modules that add subcommands (each defines add_commands(subparsers)).
+COMMAND_MODULES: tuple[str, ...] = ()
+
+log = logging.getLogger("softplc")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _configure_logging(args.verbose - args.quiet)
+    if not hasattr(args, "func"):
+        parser.print_help()
+        return EXIT_FAILURE
+    try:
+        return int(args.func(args) or 0)
+    except ConfigError as error:
+        _print_problems(error)
+        return EXIT_CONFIG
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:  # e.g. `softplc tags | head`
+        sys.stderr.close()
+        return EXIT_OK
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="softplc",
+        description="A PLC-style soft controller: tags, cyclic scan programs, OPC UA and Modbus TCP "
+        "servers and mobile robots, configured in tagdb.yaml.",
+        epilog="Start with: softplc check, then softplc run. Each command has --help.",
+    )
+    parser.add_argument("--version", action="version", version=f"softplc {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
+    parser.add_argument("-q", "--quiet", action="count", default=0, help="less log output")
+    commands = parser.add_subparsers(title="commands", metavar="COMMAND")
+
+    run = commands.add_parser(
+        "run",
+        help="run a plant: scan its programs and serve its tags",
+        description="Load CONFIG, start the scan engine and the servers, and run until Ctrl-C, "
+        "--duration or --until. Prints where it serves, a live status line, and per-task timing "
+        "statistics on exit.",
+        epilog="Examples: softplc run | softplc run --sim --duration 600 | "
+        "softplc run --sim --until 't01_qSL >= 100 or t02_qSL >= 100'",
+    )
+    run.add_argument("config", nargs="?", default=DEFAULT_CONFIG, help=f"plant configuration (default {DEFAULT_CONFIG})")
+    run.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of runtime clock")
+    run.add_argument("--sim", action="store_true", help="simulated clock: as fast as possible, identical results every run")
+    run.add_argument("--speed", type=float, metavar="N", help="with --sim: run N times faster than real time")
+    run.add_argument("--until", metavar="EXPR", help="stop when EXPR over tag names holds, e.g. 't01_qSL >= 100'")
+    run.add_argument("--state-dir", type=Path, metavar="DIR", help="where retained values etc. are kept (default .softplc next to CONFIG)")
+    run.add_argument("--no-status", action="store_true", help="no live status line")
+    from softplc.adapters import add_run_arguments
+
+    add_run_arguments(run)
+    run.set_defaults(func=cmd_run)
+
+    check = commands.add_parser(
+        "check",
+        help="validate a configuration",
+        description="Check CONFIG and every program it references. Exit 0 with a one-line summary, or "
+        "exit 2 with FILE:LINE:COL: message for each problem.",
+    )
+    check.add_argument("config", nargs="?", default=DEFAULT_CONFIG)
+    check.set_defaults(func=cmd_check)
+
+    tags = commands.add_parser("tags", help="list the tags of a configuration", description="List every tag (templates expanded, system tags included).")
+    tags.add_argument("config", nargs="?", default=DEFAULT_CONFIG)
+    tags.add_argument("--format", choices=("table", "csv", "json"), default="table")
+    tags.add_argument("--no-system", action="store_true", help="leave out the _sys. tags")
+    tags.set_defaults(func=cmd_tags)
+
+    schema = commands.add_parser("schema", help="print the JSON Schema of tagdb.yaml", description="Print the JSON Schema of the configuration file, for editors and CI.")
+    schema.set_defaults(func=cmd_schema)
+
+    for module_name in COMMAND_MODULES:
+        importlib.import_module(module_name).add_commands(commands)
+    return parser
+
+
+def _configure_logging(verbosity: int) -> None:
+    level = logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG
+    logging.basicConfig(level=level, format="softplc: %(levelname)s: %(message)s", stream=sys.stderr, force=True)
+    if verbosity < 2:
+        for noisy in ("asyncua", "pymodbus"):
+            logging.getLogger(noisy).setLevel(logging.WARNING)
+
+
+def _print_problems(error: ConfigError, stream: TextIO = sys.stderr) -> None:
+    for problem in error.problems:
+        print(problem, file=stream)
+    count = len(error.problems)
+    print(f"{count} problem{'s' if count != 1 else ''} found", file=stream)
+
+
+# -- check / tags / schema ------------------------------------------------------------------
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    config = load_config(args.config)
+    print(f"{args.config}: OK — {summary(config)}")
+    return EXIT_OK
+
+
+def summary(config: PlantConfig) -> str:
+    tasks = ", ".join(f"{task.name} {format_duration(task.interval)}" for task in config.tasks) or "none"
+    return f"{len(config.tags)} tags, {len(config.tasks)} tasks ({tasks}), {config.program_count} programs"
+
+
+def cmd_schema(args: argparse.Namespace) -> int:
+    print(json.dumps(CONFIG_SCHEMA, indent=2))
+    return EXIT_OK
+
+
+def cmd_tags(args: argparse.Namespace) -> int:
+    from softplc.systags import system_tag_definitions
+
+    config = load_config(args.config)
+    definitions = list(config.tags)
+    if not args.no_system:
+        definitions += system_tag_definitions(config.tasks)
+    rows = [
+        {
+            "name": d.name,
+            "type": d.type.value,
+            "initial": d.initial,
+            "unit": d.unit,
+            "access": d.access.value,
+            "min": d.min,
+            "max": d.max,
+            "retain": d.retain,
+            "group": d.group,
+            "description": d.description,
+        }
+        for d in definitions
+    ]
+    if args.format == "json":
+        print(json.dumps(rows, indent=2))
+    elif args.format == "csv":
+        writer = csv.DictWriter(sys.stdout, fieldnames=list(rows[0]) if rows else ["name"])
+        writer.writeheader()
+        writer.writerows(rows)
+    else:
+        columns = ("name", "type", "initial", "unit", "access", "min", "max", "group", "description")
+        print_table([[("" if row[c] is None else str(row[c])) for c in columns] for row in rows], columns)
+    return EXIT_OK
+
+
+def print_table(rows: list[list[str]], header: tuple[str, ...] | list[str], stream: TextIO = sys.stdout) -> None:
+    """Print rows as an aligned plain-text table."""
+    widths = [max([len(h)] + [len(row[i]) for row in rows]) for i, h in enumerate(header)]
+    print("  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip(), file=stream)
+    print("  ".join("-" * w for w in widths), file=stream)
+    for row in rows:
+        print("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip(), file=stream)
+
+
+# -- run ------------------------------------------------------------------------------------
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from softplc.adapters import build_adapters
+    from softplc.runtime import AdapterError, Runtime
+
+    config = load_config(args.config)
+    if args.speed is not None and not args.sim:
+        print("softplc: --speed needs --sim (real time always runs at speed 1)", file=sys.stderr)
+        return EXIT_FAILURE
+    if args.speed is not None and args.speed <= 0:
+        print("softplc: --speed must be positive", file=sys.stderr)
+        return EXIT_FAILURE
+    until = None
+    runtime_probe_names = [d.name for d in config.tags]
+    if args.until:
+        from softplc.systags import system_tag_definitions
+
+        try:
+            until = Condition(args.until, runtime_probe_names + [d.name for d in system_tag_definitions(config.tasks)])
+        except ExpressionError as error:
+            print(f"softplc: --until: {error}", file=sys.stderr)
+            return EXIT_FAILURE
+    clock = SimClock(speed=args.speed) if args.sim else RealClock()
+    runtime = Runtime(config, clock, state_dir=args.state_dir)
+    for adapter in build_adapters(config, args):
+        runtime.add_adapter(adapter)
+    show_status = not args.no_status and sys.stderr.isatty()
+
+    async def main_async() -> str:
+        loop = asyncio.get_running_loop()
+        interrupts = 0
+
+        def interrupt() -> None:
+            nonlocal interrupts
+            interrupts += 1
+            if interrupts > 1:
+                raise KeyboardInterrupt
+            runtime.request_stop("interrupted (Ctrl-C)")
+
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                loop.add_signal_handler(sig, interrupt)
+            except (NotImplementedError, RuntimeError):
+                pass
+        status = asyncio.create_task(_status_loop(runtime, show_status, args))
+        try:
+            return await runtime.run(duration=args.duration, until=until)
+        finally:
+            status.cancel()
+
+    mode = "simulated clock" + (f" x{args.speed:g}" if args.speed else ", as fast as possible") if args.sim else "real time"
+    print(f"softplc {__version__}: plant '{config.name}' — {summary(config)}; {mode}", file=sys.stderr)
+    started = time.monotonic()
+    try:
+        reason = asyncio.run(main_async())
+    except AdapterError as error:
+        print(f"softplc: cannot start: {error}", file=sys.stderr)
+        return EXIT_FAILURE
+    if show_status:
+        print(file=sys.stderr)
+    wall = time.monotonic() - started
+    print(f"stopped: {reason or 'stopped'} — runtime clock {runtime.clock.now():.1f} s in {wall:.1f} s wall time", file=sys.stderr)
+    print_task_statistics(runtime, sys.stderr)
+    return EXIT_OK if runtime.error == "" else EXIT_FAILURE
+
+
+async def _status_loop(runtime: Any, show: bool, args: argparse.Namespace) -> None:
+    """Announce the adapters once they are up, then keep a one-line status (real time)."""
+    while runtime.state.value == "STARTING":
+        await asyncio.sleep(0.05)
+    for adapter in runtime.adapters:
+        print(f"serving: {adapter.describe()}", file=sys.stderr)
+    if not runtime.adapters:
+        print("serving: nothing (no server enabled)", file=sys.stderr)
+    print("press Ctrl-C to stop", file=sys.stderr)
+    last_error = ""
+    while True:
+        await asyncio.sleep(0.5 if show else 1.0)
+        if runtime.error and runtime.error != last_error:
+            last_error = runtime.error
+            print(f"\nsoftplc: {runtime.state.value}: {runtime.error}", file=sys.stderr)
+        if show:
+            print("\r" + status_line(runtime) + "\033[K", end="", file=sys.stderr, flush=True)
+
+
+def status_line(runtime: Any) -> str:
+    parts = [f"{runtime.state.value}", f"t={runtime.clock.now():9.1f}s"]
+    for task in runtime.tasks:
+        stats = task.stats
+        parts.append(f"{task.name}: {stats.cycles} cycles, {stats.overruns} overruns")
+    faulted = [i.name for t in runtime.tasks for i in t.programs if i.state.value == "FAULTED"]
+    if faulted:
+        parts.append("FAULTED: " + ", ".join(faulted))
+    return " | ".join(parts)
+
+
+def print_task_statistics(runtime: Any, stream: TextIO) -> None:
+    header = ("task", "interval", "cycles", "overruns", "wd trips", "scan ms min/mean/p99/max", "latency ms min/mean/p99/max", "cycle ms mean/max")
+    rows = []
+    for task in runtime.tasks:
+        stats = task.stats
+        scan, latency, cycle = stats.scan.summary(), stats.latency.summary(), stats.cycle.summary()
+        rows.append([
+            task.name,
+            format_duration(task.interval),
+            str(stats.cycles),
+            str(stats.overruns),
+            str(stats.watchdog_trips),
+            "/".join(f"{scan[k]:.3f}" for k in ("min", "mean", "p99", "max")),
+            "/".join(f"{latency[k]:.3f}" for k in ("min", "mean", "p99", "max")),
+            "/".join(f"{cycle[k]:.3f}" for k in ("mean", "max")),
+        ])
+    if rows:
+        print_table(rows, header, stream)
+    for task in runtime.tasks:
+        for instance in task.programs:
+            if instance.state.value != "RUNNING":
+                print(f"program {instance.name}: {instance.state.value} {instance.error}", file=stream)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,177 @@
+"""The one clock everything that waits takes its time from: real, or simulated.
+
+`RealClock` follows the monotonic system clock. `SimClock` is a discrete-event clock: time
+jumps to the next deadline as soon as every coroutine waiting on the clock is idle, so a
+20-minute plant run takes seconds and the order of events is the same every run. With
+`speed=N` it runs N times faster than real time instead of as fast as possible.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import heapq
+import itertools
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+class Clock(ABC):
+    """Time source for the runtime: `now()` is monotonic seconds since the clock started."""
+
+    @abstractmethod
+    def now(self) -> float: ...
+
+    @abstractmethod
+    def wall(self) -> float:
+        """Seconds since the Unix epoch corresponding to `now()` (for tag timestamps)."""
+
+    @abstractmethod
+    async def sleep_until(self, deadline: float) -> None: ...
+
+    async def sleep(self, seconds: float) -> None:
+        await self.sleep_until(self.now() + max(0.0, seconds))
+
+    @abstractmethod
+    async def run_blocking(self, function: Callable[..., T], *args: Any) -> T:
+        """Run blocking work (e.g. path planning) without stalling the clock's consumers."""
+
+    @property
+    def simulated(self) -> bool:
+        return False
+
+
+class RealClock(Clock):
+    """Monotonic real time.
+
+    `spin` is how long before a deadline `sleep_until` stops sleeping in the event loop and
+    yields in a tight loop instead: asyncio's timers wake up to ~1 ms late (epoll resolution),
+    which would dominate a 10 ms task's start latency.
+    """
+
+    def __init__(self, spin: float = 0.0015) -> None:
+        self._origin = time.monotonic()
+        self._wall_origin = time.time()
+        self.spin = spin
+
+    def now(self) -> float:
+        return time.monotonic() - self._origin
+
+    def wall(self) -> float:
+        return self._wall_origin + self.now()
+
+    async def sleep_until(self, deadline: float) -> None:
+        remaining = deadline - self.now()
+        if remaining > self.spin:
+            await asyncio.sleep(remaining - self.spin)
+        while self.now() < deadline:
+            await asyncio.sleep(0)
+
+    async def run_blocking(self, function: Callable[..., T], *args: Any) -> T:
+        return await asyncio.get_running_loop().run_in_executor(None, function, *args)
+
+
+class SimClock(Clock):
+    """Simulated time that advances from deadline to deadline.
+
+    Call `await clock.drive()` (the runtime does) to advance time: whenever the event loop
+    has nothing ready to run, the earliest waiting sleeper is woken with `now()` set to its
+    deadline. Ties wake in the order the sleeps were requested, so runs are reproducible.
+    """
+
+    def __init__(self, speed: float | None = None, epoch: float = 1_767_225_600.0) -> None:
+        if speed is not None and speed <= 0:
+            raise ValueError("speed must be positive")
+        self.speed = speed
+        self._now = 0.0
+        self._epoch = epoch  # 2026-01-01T00:00:00Z: fixed so simulated timestamps repeat
+        self._sleepers: list[tuple[float, int, asyncio.Future[None]]] = []
+        self._sequence = itertools.count()
+        self._wakeup: asyncio.Event | None = None
+
+    @property
+    def simulated(self) -> bool:
+        return True
+
+    def now(self) -> float:
+        return self._now
+
+    def wall(self) -> float:
+        return self._epoch + self._now
+
+    async def sleep_until(self, deadline: float) -> None:
+        future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        heapq.heappush(self._sleepers, (max(deadline, self._now), next(self._sequence), future))
+        if self._wakeup is not None:
+            self._wakeup.set()
+        await future
+
+    async def run_blocking(self, function: Callable[..., T], *args: Any) -> T:
+        # Simulated time stands still while the work runs, so running it inline is both
+        # faithful and deterministic.
+        return function(*args)
+
+    async def drive(self, until: float | None = None) -> None:
+        """Advance time forever (or until `until`), waking sleepers in deadline order."""
+        loop = asyncio.get_running_loop()
+        self._wakeup = asyncio.Event()
+        real_origin = time.monotonic()
+        sim_origin = self._now
+        while until is None or self._now < until:
+            await _settle(loop)
+            while self._sleepers and self._sleepers[0][2].cancelled():
+                heapq.heappop(self._sleepers)
+            if not self._sleepers:
+                self._wakeup.clear()
+                await self._wakeup.wait()
+                continue
+            deadline = self._sleepers[0][0]
+            if until is not None and deadline > until:
+                self._now = until
+                break
+            if self.speed is not None:
+                real_deadline = real_origin + (deadline - sim_origin) / self.speed
+                delay = real_deadline - time.monotonic()
+                if delay > 0:
+                    self._wakeup.clear()
+                    try:
+                        # A new, earlier sleeper may arrive while we wait in real time.
+                        await asyncio.wait_for(self._wakeup.wait(), delay)
+                        continue
+                    except TimeoutError:
+                        pass
+            _, _, future = heapq.heappop(self._sleepers)
+            self._now = deadline
+            if not future.done():
+                future.set_result(None)
+
+
+async def _settle(loop: asyncio.AbstractEventLoop) -> None:
+    """Yield until the event loop has no ready callbacks left (everyone is waiting)."""
+    ready = getattr(loop, "_ready", None)
+    if ready is None:  # an event loop without a visible ready queue: yield generously
+        for _ in range(20):
+            await asyncio.sleep(0)
+        return
+    await asyncio.sleep(0)
+    for _ in range(10_000):
+        if not ready:
+            return
+        await asyncio.sleep(0)
+
+
+async def wait_for(clock: Clock, awaitable: Awaitable[T], timeout: float) -> T:
+    """`asyncio.wait_for` with the timeout measured on `clock`."""
+    task = asyncio.ensure_future(awaitable)
+    timer = asyncio.ensure_future(clock.sleep(timeout))
+    try:
+        done, _ = await asyncio.wait({task, timer}, return_when=asyncio.FIRST_COMPLETED)
+        if task in done:
+            return task.result()
+        task.cancel()
+        raise TimeoutError(f"timed out after {timeout} s")
+    finally:
+        timer.cancel()

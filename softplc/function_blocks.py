@@ -1,0 +1,180 @@
+"""IEC 61131-3 standard function blocks: TON, TOF, TP, R_TRIG, F_TRIG, CTU, CTD.
+
+Timers take their time from the runtime clock, so they behave identically on the simulated
+clock. Call a block once per scan, as in a PLC:
+
+    self.delay = TON(self.clock)          # in setup()
+    self.delay(IN=self.ready, PT=2.0)     # in scan(); PT in seconds
+    if self.delay.Q: ...
+"""
+
+from __future__ import annotations
+
+from softplc.clock import Clock
+
+# The IEC names are kept on purpose (TON, IN, PT, Q, ET, CU, PV, CV): PLC engineers know them.
+# ruff: noqa: N802, N803, N815
+
+
+class TON:
+    """On-delay timer: Q becomes true PT seconds after IN became true; ET is elapsed time."""
+
+    def __init__(self, clock: Clock, PT: float = 0.0) -> None:
+        self._clock = clock
+        self.PT = PT
+        self.IN = False
+        self.Q = False
+        self.ET = 0.0
+        self._start: float | None = None
+
+    def __call__(self, IN: bool, PT: float | None = None) -> bool:
+        if PT is not None:
+            self.PT = PT
+        self.IN = IN
+        if not IN:
+            self._start = None
+            self.Q = False
+            self.ET = 0.0
+            return self.Q
+        now = self._clock.now()
+        if self._start is None:
+            self._start = now
+        self.ET = min(now - self._start, self.PT)
+        self.Q = now - self._start >= self.PT
+        return self.Q
+
+
+class TOF:
+    """Off-delay timer: Q follows IN up, and drops PT seconds after IN went false."""
+
+    def __init__(self, clock: Clock, PT: float = 0.0) -> None:
+        self._clock = clock
+        self.PT = PT
+        self.IN = False
+        self.Q = False
+        self.ET = 0.0
+        self._fall: float | None = None
+
+    def __call__(self, IN: bool, PT: float | None = None) -> bool:
+        if PT is not None:
+            self.PT = PT
+        self.IN = IN
+        if IN:
+            self._fall = None
+            self.Q = True
+            self.ET = 0.0
+            return self.Q
+        if not self.Q:
+            return self.Q
+        now = self._clock.now()
+        if self._fall is None:
+            self._fall = now
+        self.ET = min(now - self._fall, self.PT)
+        if now - self._fall >= self.PT:
+            self.Q = False
+        return self.Q
+
+
+class TP:
+    """Pulse timer: a rising edge of IN gives a pulse of exactly PT seconds on Q."""
+
+    def __init__(self, clock: Clock, PT: float = 0.0) -> None:
+        self._clock = clock
+        self.PT = PT
+        self.IN = False
+        self.Q = False
+        self.ET = 0.0
+        self._start: float | None = None
+        self._previous_in = False
+
+    def __call__(self, IN: bool, PT: float | None = None) -> bool:
+        if PT is not None:
+            self.PT = PT
+        now = self._clock.now()
+        if IN and not self._previous_in and self._start is None:
+            self._start = now
+        self._previous_in = IN
+        self.IN = IN
+        if self._start is not None:
+            elapsed = now - self._start
+            if elapsed < self.PT:
+                self.Q = True
+                self.ET = elapsed
+            else:
+                self.Q = False
+                self.ET = self.PT
+                if not IN:  # the pulse is over and IN fell: ready for the next edge
+                    self._start = None
+                    self.ET = 0.0
+        else:
+            self.Q = False
+            self.ET = 0.0
+        return self.Q
+
+
+class R_TRIG:
+    """Rising-edge detector: Q is true for the one scan in which CLK goes false → true."""
+
+    def __init__(self) -> None:
+        self.CLK = False
+        self.Q = False
+
+    def __call__(self, CLK: bool) -> bool:
+        self.Q = CLK and not self.CLK
+        self.CLK = CLK
+        return self.Q
+
+
+class F_TRIG:
+    """Falling-edge detector: Q is true for the one scan in which CLK goes true → false."""
+
+    def __init__(self) -> None:
+        self.CLK = False
+        self.Q = False
+
+    def __call__(self, CLK: bool) -> bool:
+        self.Q = self.CLK and not CLK
+        self.CLK = CLK
+        return self.Q
+
+
+class CTU:
+    """Up counter: CV counts rising edges of CU; Q when CV ≥ PV; RESET sets CV to 0."""
+
+    def __init__(self, PV: int = 0) -> None:
+        self.PV = PV
+        self.CV = 0
+        self.Q = False
+        self._edge = R_TRIG()
+
+    def __call__(self, CU: bool, RESET: bool = False, PV: int | None = None) -> bool:
+        if PV is not None:
+            self.PV = PV
+        rising = self._edge(CU)
+        if RESET:
+            self.CV = 0
+        elif rising:
+            self.CV += 1
+        self.Q = self.CV >= self.PV
+        return self.Q
+
+
+class CTD:
+    """Down counter: CV counts down on rising edges of CD; Q when CV ≤ 0; LOAD sets CV = PV."""
+
+    def __init__(self, PV: int = 0) -> None:
+        self.PV = PV
+        self.CV = 0
+        self.Q = True
+        self._edge = R_TRIG()
+
+    def __call__(self, CD: bool, LOAD: bool = False, PV: int | None = None) -> bool:
+        if PV is not None:
+            self.PV = PV
+        rising = self._edge(CD)
+        if LOAD:
+            self.CV = self.PV
+        elif rising:
+            self.CV -= 1
+        self.Q = self.CV <= 0
+        return self.Q

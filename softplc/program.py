@@ -1,0 +1,149 @@
+"""Scan programs: a Python class with a `scan()` method whose variables are bound to tags.
+
+    class InputBufferFiller(Program):
+        items = InOut("items in the buffer")
+        level = Output("fill level, %")
+        capacity = Input("buffer capacity")
+        period = Param(2.0, "seconds per item")
+
+        def scan(self) -> None:
+            ...
+
+`tagdb.yaml` binds each variable to a tag (or a list of tags), so one class serves r01, r02
+and r03 with different bindings — the thesis's variable→tag map. Before each scan the runtime
+loads every bound variable from the task's input image; after it, Output and InOut variables
+whose value changed become the program's outputs, committed with the rest of the task's
+outputs at the end of the cycle.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from softplc.clock import Clock
+from softplc.durations import parse_duration
+
+_MISSING: Any = object()
+
+
+class Direction(enum.Enum):
+    INPUT = "input"
+    OUTPUT = "output"
+    INOUT = "inout"
+
+    @property
+    def writes(self) -> bool:
+        return self is not Direction.INPUT
+
+
+class Variable:
+    """A program variable bound to a tag (or, when bound to a list, to several tags)."""
+
+    direction: ClassVar[Direction]
+
+    def __init__(self, description: str = "", *, optional: bool = False) -> None:
+        self.description = description
+        self.optional = optional
+        self.name = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+
+class Input(Variable):
+    """Read from its tag each scan; changes made by the program are not written back."""
+
+    direction = Direction.INPUT
+
+
+class Output(Variable):
+    """Written to its tag at the end of the cycle when the program changed it."""
+
+    direction = Direction.OUTPUT
+
+
+class InOut(Variable):
+    """Read each scan and written back when changed (IEC VAR_IN_OUT)."""
+
+    direction = Direction.INOUT
+
+
+class Param:
+    """A constant set from `params:` in the configuration (not a tag)."""
+
+    def __init__(self, default: Any = _MISSING, description: str = "", *, duration: bool = False) -> None:
+        self.default = default
+        self.description = description
+        self.duration = duration
+        self.name = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    @property
+    def required(self) -> bool:
+        return self.default is _MISSING
+
+    def convert(self, value: Any) -> Any:
+        """Check a configured value against the default's type; raise ValueError if wrong."""
+        if self.duration:
+            return parse_duration(value)
+        if self.default is _MISSING or self.default is None:
+            return value
+        expected = type(self.default)
+        if expected is float and isinstance(value, int) and not isinstance(value, bool):
+            return float(value)
+        if not isinstance(value, expected) or (expected is int and isinstance(value, bool)):
+            raise ValueError(f"expected {expected.__name__}, got {type(value).__name__} {value!r}")
+        return value
+
+
+@dataclass(frozen=True)
+class ProgramContext:
+    """What the runtime hands a program when it creates it."""
+
+    name: str
+    clock: Clock
+    params: dict[str, Any]
+
+
+class Program:
+    """Base class of scan programs. Override `scan()`; optionally `setup()`."""
+
+    variables: ClassVar[dict[str, Variable]] = {}
+    params: ClassVar[dict[str, Param]] = {}
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        variables: dict[str, Variable] = {}
+        params: dict[str, Param] = {}
+        for klass in reversed(cls.__mro__):
+            for name, attribute in vars(klass).items():
+                if isinstance(attribute, Variable):
+                    variables[name] = attribute
+                elif isinstance(attribute, Param):
+                    params[name] = attribute
+        cls.variables = variables
+        cls.params = params
+
+    def __init__(self, context: ProgramContext) -> None:
+        self.name = context.name
+        self.clock = context.clock
+        self.log = logging.getLogger(f"softplc.program.{context.name}")
+        for name, param in self.params.items():
+            setattr(self, name, context.params.get(name, param.default))
+
+    @property
+    def now(self) -> float:
+        """Current runtime time in seconds (simulated time under `--sim`)."""
+        return self.clock.now()
+
+    def setup(self) -> None:
+        """Called once before the first scan, and again after a restart."""
+
+    def scan(self) -> None:
+        """One scan: read the bound variables, compute, assign outputs."""
+        raise NotImplementedError(f"{type(self).__name__} must define scan()")

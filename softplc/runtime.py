@@ -1,0 +1,292 @@
+"""The composition root: builds the core from a PlantConfig and runs it with its adapters.
+
+The core (tag database, scan engine, clock) knows nothing of protocols or robots; adapters
+(see `softplc.adapters`) are handed the runtime when they start and use only its public API:
+`runtime.db`, `runtime.clock`, `runtime.engine`, `runtime.spawn()`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import logging
+from collections.abc import Coroutine
+from pathlib import Path
+from typing import Any, Protocol
+
+from softplc.clock import Clock, RealClock, SimClock
+from softplc.config import PlantConfig
+from softplc.datatypes import TypeMismatch
+from softplc.durations import parse_duration
+from softplc.expression import Condition
+from softplc.program import ProgramContext
+from softplc.retain import RetainStore
+from softplc.scan import ProgramInstance, ProgramState, ScanEngine, Task
+from softplc.stall import StallDetector
+from softplc.systags import SystemTags, system_tag_definitions
+from softplc.tagdb import TagDatabase
+from softplc.tags import Tag
+
+log = logging.getLogger(__name__)
+
+
+class RuntimeState(enum.Enum):
+    STARTING = "STARTING"
+    RUNNING = "RUNNING"
+    ERROR = "ERROR"
+    STOPPING = "STOPPING"
+    STOPPED = "STOPPED"
+
+
+class Adapter(Protocol):
+    """Something started around the core: a protocol server, a robot fleet, the HMI."""
+
+    name: str
+
+    async def start(self, runtime: Runtime) -> None: ...
+
+    async def stop(self) -> None: ...
+
+    def describe(self) -> str:
+        """One line for the user: where it serves, e.g. 'OPC UA on opc.tcp://127.0.0.1:4840/'."""
+        ...
+
+
+class AdapterError(RuntimeError):
+    """An adapter could not start (port in use, bad certificate...); the message says why."""
+
+
+class Runtime:
+    """One plant: its tags, tasks and adapters, on one clock."""
+
+    def __init__(self, config: PlantConfig, clock: Clock | None = None, *, state_dir: Path | None = None) -> None:
+        self.config = config
+        self.clock = clock or RealClock()
+        self.state_dir = state_dir or config.state_dir
+        self.db = TagDatabase([*config.tags, *system_tag_definitions(config.tasks)], self.clock.wall)
+        self.tasks = [self._build_task(task) for task in config.tasks]
+        self.engine = ScanEngine(self.clock, self.db, self.tasks)
+        self.engine.after_cycle(self._after_cycle)
+        self.system_tags = SystemTags(self.db, self.engine, self._state_for_tags, self.reset_faults)
+        self.adapters: list[Adapter] = []
+        self.state = RuntimeState.STARTING
+        self.error = ""
+        self.stop_reason = ""
+        self._stop_event: asyncio.Event | None = None
+        self._background: list[asyncio.Task[Any]] = []
+        self._stall: tuple[Task, str, str] | None = None
+        self._stall_detector: StallDetector | None = None
+        self._retain: RetainStore | None = None
+        self._retain_dirty: dict[str, Tag] = {}
+        self._started = False
+
+    def _build_task(self, task: Any) -> Task:
+        instances = []
+        for program in task.programs:
+            instance = ProgramInstance(
+                program.name,
+                program.cls(ProgramContext(program.name, self.clock, dict(program.params))),
+                program.bindings,
+                program.restart,
+            )
+            if not program.enabled:
+                instance.state = ProgramState.STOPPED
+            instances.append(instance)
+        return Task(task.name, task.interval, instances, priority=task.priority, watchdog=task.watchdog)
+
+    # -- public API -----------------------------------------------------------------------
+
+    def program(self, name: str) -> ProgramInstance:
+        for task in self.tasks:
+            for instance in task.programs:
+                if instance.name == name:
+                    return instance
+        raise KeyError(name)
+
+    def add_adapter(self, adapter: Adapter) -> None:
+        self.adapters.append(adapter)
+
+    def spawn(self, coroutine: Coroutine[Any, Any, Any], name: str) -> asyncio.Task[Any]:
+        """Run a background coroutine for the runtime's lifetime; its crash is logged, not lost."""
+        task = asyncio.create_task(coroutine, name=name)
+        task.add_done_callback(self._background_done)
+        self._background.append(task)
+        return task
+
+    def request_stop(self, reason: str) -> None:
+        if not self.stop_reason:
+            self.stop_reason = reason
+        if self._stop_event is not None:
+            self._stop_event.set()
+
+    def reset_faults(self) -> None:
+        for task in self.tasks:
+            for instance in task.programs:
+                if instance.state is ProgramState.FAULTED:
+                    instance.reset()
+        if self.state is RuntimeState.ERROR:
+            self.state = RuntimeState.RUNNING
+            self.error = ""
+
+    # -- lifecycle ------------------------------------------------------------------------
+
+    async def start(self) -> None:
+        """Load retained values, start programs, the scan engine and every adapter."""
+        if self._started:
+            raise RuntimeError("runtime already started")
+        self._started = True
+        self._stop_event = asyncio.Event()
+        self._load_retained()
+        self.engine.start_programs()
+        self.system_tags.publish(self.clock.now())
+        if isinstance(self.clock, SimClock):
+            self.spawn(self.clock.drive(), "sim-clock")
+        started: list[Adapter] = []
+        try:
+            for adapter in self.adapters:
+                await adapter.start(self)
+                started.append(adapter)
+        except BaseException:
+            for adapter in reversed(started):
+                await _quietly(adapter.stop(), adapter.name)
+            await self._cancel_background()
+            raise
+        self.state = RuntimeState.RUNNING
+        self.spawn(self.engine.run(), "scan-engine")
+        self.spawn(self._housekeeping(), "housekeeping")
+        self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after())
+        self._stall_detector.start()
+
+    async def stop(self) -> None:
+        """Stop scanning, stop adapters, save retained values. Safe to call twice."""
+        if self.state is RuntimeState.STOPPED:
+            return
+        self.state = RuntimeState.STOPPING
+        self.engine.stop()
+        if self._stall_detector is not None:
+            self._stall_detector.stop()
+        for adapter in reversed(self.adapters):
+            await _quietly(adapter.stop(), adapter.name)
+        await self._cancel_background()
+        self._flush_retained()
+        if self._retain is not None:
+            self._retain.close()
+        self.state = RuntimeState.STOPPED
+
+    async def run(self, duration: float | None = None, until: Condition | None = None) -> str:
+        """Start, run until `duration` (clock seconds), `until` holds or `request_stop()`, stop."""
+        if until is not None:
+            self.engine.after_cycle(lambda task: self._check_until(until))
+        await self.start()
+        try:
+            if duration is not None:
+                self.spawn(self._stop_after(duration), "duration")
+            assert self._stop_event is not None
+            await self._stop_event.wait()
+        finally:
+            await self.stop()
+        return self.stop_reason
+
+    # -- internals ------------------------------------------------------------------------
+
+    def _stall_after(self) -> float | None:
+        value = self.config.runtime.get("stall_after")
+        return parse_duration(value) if value is not None else None
+
+    def _state_for_tags(self) -> tuple[str, str]:
+        return self.state.value, self.error
+
+    def _check_until(self, condition: Condition) -> None:
+        if not self.stop_reason and condition.evaluate(self.db.value):
+            self.request_stop(f"condition met: {condition.text}")
+
+    async def _stop_after(self, duration: float) -> None:
+        await self.clock.sleep(duration)
+        self.request_stop(f"duration of {duration:g} s reached")
+
+    async def _housekeeping(self) -> None:
+        """Publish system tags twice a second and save retained values once a second."""
+        tick = 0
+        while True:
+            await self.clock.sleep(0.5)
+            self.system_tags.publish(self.clock.now())
+            tick += 1
+            if tick % 2 == 0:
+                self._flush_retained()
+
+    def _after_cycle(self, task: Task) -> None:
+        if self._stall is not None:
+            stalled_task, program, message = self._stall
+            self._stall = None
+            for instance in stalled_task.programs:
+                if instance.name == program and instance.state is ProgramState.RUNNING:
+                    instance.fault(message, self.clock.now())
+
+    def _on_stall(self, task: Task, program: str, message: str) -> None:
+        # Called from the stall detector's thread while the loop is blocked: only plain
+        # attribute writes here; the loop picks them up when the scan returns.
+        self.state = RuntimeState.ERROR
+        self.error = message
+        self._stall = (task, program, message)
+
+    def _background_done(self, task: asyncio.Task[Any]) -> None:
+        if task.cancelled():
+            return
+        error = task.exception()
+        if error is not None:
+            log.error("background task %s crashed: %r", task.get_name(), error, exc_info=error)
+            self.state = RuntimeState.ERROR
+            self.error = f"{task.get_name()} crashed: {error!r}"
+
+    async def _cancel_background(self) -> None:
+        for task in self._background:
+            task.cancel()
+        for task in self._background:
+            try:
+                await task
+            except (asyncio.CancelledError, Exception):
+                pass
+        self._background.clear()
+
+    def _load_retained(self) -> None:
+        retained = [tag for tag in self.db if tag.definition.retain]
+        if not retained:
+            return
+        self._retain = RetainStore(self.state_dir / "retain.sqlite")
+        stored = self._retain.load()
+        values: dict[str, Any] = {}
+        for tag in retained:
+            if tag.name not in stored:
+                continue
+            type_name, value = stored[tag.name]
+            try:
+                values[tag.name] = tag.definition.type.coerce(value)
+            except TypeMismatch:
+                log.warning("retained value %r of %s (%s) no longer fits its type %s; using the initial value",
+                            value, tag.name, type_name, tag.definition.type.value)
+        self.db.commit(values)
+        if values:
+            log.info("restored %d retained tag values from %s", len(values), self._retain.path)
+        self.db.on_change(self._note_retained)
+
+    def _note_retained(self, changed: Any) -> None:
+        for tag in changed:
+            if tag.definition.retain:
+                self._retain_dirty[tag.name] = tag
+
+    def _flush_retained(self) -> None:
+        if self._retain is None or not self._retain_dirty:
+            return
+        dirty, self._retain_dirty = self._retain_dirty, {}
+        try:
+            self._retain.save({name: (tag.definition.type.value, tag.value) for name, tag in dirty.items()})
+        except Exception as error:
+            log.error("cannot save retained values to %s: %s", self._retain.path, error)
+            self._retain_dirty.update(dirty)
+
+
+async def _quietly(coroutine: Coroutine[Any, Any, Any], name: str) -> None:
+    try:
+        await coroutine
+    except Exception:
+        log.exception("stopping %s failed", name)

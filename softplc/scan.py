@@ -1,0 +1,307 @@
+"""The scan engine: cyclic tasks on absolute deadlines, each cycle on one consistent image.
+
+A cycle of a task:
+1. apply the journal of external writes (protocols, robots, HMI) — the only place they land;
+2. take the input image: the current values of every tag the task's programs bind;
+3. run the programs in order; each sees the image plus the outputs of the programs before it;
+4. commit all outputs to the tag database at once.
+
+Releases are at `origin + k * interval` on the runtime clock. A cycle that ends after its next
+release skips the missed releases and counts them as overruns; it never bursts to catch up.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from softplc.clock import Clock
+from softplc.program import Direction, Program
+from softplc.stats import TimingSeries
+from softplc.tagdb import Rule, TagDatabase, WriteRejected
+
+log = logging.getLogger(__name__)
+
+
+class ProgramState(enum.Enum):
+    RUNNING = "RUNNING"
+    FAULTED = "FAULTED"
+    STOPPED = "STOPPED"
+
+
+@dataclass(frozen=True)
+class RestartPolicy:
+    """What to do when a program raises: stay FAULTED (`stop`) or restart after a delay."""
+
+    on_fault: str = "stop"  # "stop" | "restart"
+    delay: float = 1.0
+    max_restarts: int = 3
+
+
+Binding = str | list[str]
+
+
+class ProgramInstance:
+    """A program object with its tag bindings, its state and its fault record."""
+
+    def __init__(
+        self,
+        name: str,
+        program: Program,
+        bindings: dict[str, Binding],
+        restart: RestartPolicy = RestartPolicy(),
+    ) -> None:
+        self.name = name
+        self.program = program
+        self.bindings = bindings
+        self.restart = restart
+        self.state = ProgramState.RUNNING
+        self.error = ""
+        self.faults = 0
+        self.restarts = 0
+        self._retry_at = math.inf
+        variables = type(program).variables
+        self.outputs = {var: tag for var, tag in bindings.items() if variables[var].direction.writes}
+        # Optional variables left unbound read as None and are never written.
+        for var, variable in variables.items():
+            if var not in bindings:
+                setattr(program, var, None)
+
+    @property
+    def tag_names(self) -> list[str]:
+        names: list[str] = []
+        for binding in self.bindings.values():
+            names.extend([binding] if isinstance(binding, str) else binding)
+        return names
+
+    def start(self) -> None:
+        """Run the program's setup; a setup that raises faults the program."""
+        try:
+            self.program.setup()
+        except Exception as error:
+            self.fault(error, 0.0)
+
+    def fault(self, error: BaseException | str, now: float) -> None:
+        self.state = ProgramState.FAULTED
+        self.faults += 1
+        if isinstance(error, BaseException):
+            frame = traceback.extract_tb(error.__traceback__)[-1:] if error.__traceback__ else []
+            where = f" at {frame[0].filename}:{frame[0].lineno}" if frame else ""
+            self.error = f"{type(error).__name__}: {error}{where}"
+        else:
+            self.error = error
+        log.error("program %s FAULTED: %s", self.name, self.error)
+        if self.restart.on_fault == "restart" and self.restarts < self.restart.max_restarts:
+            self._retry_at = now + self.restart.delay
+        else:
+            self._retry_at = math.inf
+
+    def reset(self) -> None:
+        """Clear a fault and start again (an operator's reset)."""
+        self.restarts = 0
+        self.state = ProgramState.RUNNING
+        self.error = ""
+        self._retry_at = math.inf
+        self.start()
+
+    def maybe_restart(self, now: float) -> None:
+        if self.state is ProgramState.FAULTED and now >= self._retry_at:
+            self.restarts += 1
+            log.warning("restarting program %s (restart %d of %d)", self.name, self.restarts, self.restart.max_restarts)
+            self.state = ProgramState.RUNNING
+            self._retry_at = math.inf
+            self.start()
+
+    def scan(self, image: dict[str, Any], db: TagDatabase, now: float) -> dict[str, Any]:
+        """Run one scan against `image`; return the validated outputs (empty if it faulted)."""
+        program = self.program
+        attributes = program.__dict__
+        for var, binding in self.bindings.items():
+            attributes[var] = image[binding] if isinstance(binding, str) else [image[t] for t in binding]
+        try:
+            program.scan()
+        except Exception as error:
+            self.fault(error, now)
+            return {}
+        outputs: dict[str, Any] = {}
+        try:
+            for var, binding in self.outputs.items():
+                value = attributes[var]
+                if isinstance(binding, str):
+                    if value != image[binding] or type(value) is not type(image[binding]):
+                        outputs[binding] = db.validate(binding, value, client=False)
+                    continue
+                if not isinstance(value, list) or len(value) != len(binding):
+                    raise WriteRejected(var, Rule.TYPE_MISMATCH, f"must stay a list of {len(binding)} values")
+                for tag, item in zip(binding, value):
+                    if item != image[tag] or type(item) is not type(image[tag]):
+                        outputs[tag] = db.validate(tag, item, client=False)
+        except WriteRejected as rejected:
+            self.fault(f"wrote an invalid value: {rejected}", now)
+            return {}
+        return outputs
+
+
+
+@dataclass
+class TaskStats:
+    """Per-task timing: scan time, cycle time, start latency (seconds), overruns."""
+
+    scan: TimingSeries = field(default_factory=TimingSeries)
+    cycle: TimingSeries = field(default_factory=TimingSeries)
+    latency: TimingSeries = field(default_factory=TimingSeries)
+    cycles: int = 0
+    overruns: int = 0
+    watchdog_trips: int = 0
+
+    def reset(self) -> None:
+        self.scan.reset()
+        self.cycle.reset()
+        self.latency.reset()
+        self.cycles = 0
+        self.overruns = 0
+        self.watchdog_trips = 0
+
+
+class Task:
+    """A cyclic PLC task: an interval, a priority (0 = highest), a watchdog and programs."""
+
+    def __init__(
+        self,
+        name: str,
+        interval: float,
+        programs: Sequence[ProgramInstance],
+        *,
+        priority: int = 10,
+        watchdog: float | None = None,
+    ) -> None:
+        if interval <= 0:
+            raise ValueError(f"task {name}: interval must be positive")
+        self.name = name
+        self.interval = interval
+        self.priority = priority
+        self.watchdog = watchdog if watchdog is not None else interval
+        self.programs = list(programs)
+        self.stats = TaskStats()
+        names: dict[str, None] = {}
+        for instance in self.programs:
+            names.update(dict.fromkeys(instance.tag_names))
+        self.tag_names = list(names)
+        self.next_release = 0.0
+        self.running_program = ""  # read by the stall detector while a scan is under way
+        self._origin = 0.0
+        self._k = 0
+        self._last_start: float | None = None
+
+    def schedule_from(self, origin: float) -> None:
+        self._origin = origin
+        self._k = 0
+        self.next_release = origin
+        self._last_start = None
+
+    def run_cycle(self, db: TagDatabase, now: float) -> list[str]:
+        """One cycle (journal already applied): image → programs → commit. Returns changed tag names."""
+        image = db.snapshot(self.tag_names)
+        outputs: dict[str, Any] = {}
+        for instance in self.programs:
+            instance.maybe_restart(now)
+            if instance.state is not ProgramState.RUNNING:
+                continue
+            self.running_program = instance.name
+            produced = instance.scan(image, db, now)
+            if produced:
+                image.update(produced)
+                outputs.update(produced)
+        self.running_program = ""
+        return [tag.name for tag in db.commit(outputs)]
+
+    def record(self, release: float, start: float, end: float) -> None:
+        """Account for a cycle and compute the next release (skipping missed ones)."""
+        stats = self.stats
+        stats.cycles += 1
+        stats.latency.add(max(0.0, start - release))
+        stats.scan.add(end - start)
+        if self._last_start is not None:
+            stats.cycle.add(start - self._last_start)
+        self._last_start = start
+        if end - start > self.watchdog:
+            stats.watchdog_trips += 1
+        self._k += 1
+        next_release = self._origin + self._k * self.interval
+        if end > next_release:
+            missed = math.floor((end - next_release) / self.interval) + 1
+            self._k += missed
+            stats.overruns += missed
+            next_release = self._origin + self._k * self.interval
+        self.next_release = next_release
+
+
+@dataclass
+class CurrentScan:
+    """The cycle under way; read by the stall detector from another thread."""
+
+    task: Task
+    real_start: float
+
+
+class ScanEngine:
+    """Runs tasks on one clock, the due task with the highest priority first."""
+
+    def __init__(self, clock: Clock, db: TagDatabase, tasks: Sequence[Task]) -> None:
+        self.clock = clock
+        self.db = db
+        self.tasks = sorted(tasks, key=lambda task: task.priority)
+        self.current: CurrentScan | None = None
+        self._after_cycle: list[Callable[[Task], None]] = []
+        self._stopping = False
+
+    def after_cycle(self, callback: Callable[[Task], None]) -> None:
+        """Call `callback(task)` after every cycle (e.g. to evaluate a stop condition)."""
+        self._after_cycle.append(callback)
+
+    def stop(self) -> None:
+        self._stopping = True
+
+    def start_programs(self) -> None:
+        for task in self.tasks:
+            for instance in task.programs:
+                instance.start()
+
+    async def run(self) -> None:
+        """Scan until `stop()`. With no tasks, apply the write journal every 10 ms instead."""
+        clock = self.clock
+        origin = clock.now()
+        for task in self.tasks:
+            task.schedule_from(origin)
+        if not self.tasks:
+            while not self._stopping:
+                self.db.apply_journal()
+                await clock.sleep(0.01)
+            return
+        while not self._stopping:
+            task = min(self.tasks, key=lambda t: (t.next_release, t.priority))
+            release = task.next_release
+            await clock.sleep_until(release)
+            if self._stopping:
+                break
+            self.cycle(task, release)
+
+    def cycle(self, task: Task, release: float) -> None:
+        clock = self.clock
+        start = clock.now()
+        self.current = CurrentScan(task, time.monotonic())
+        try:
+            self.db.apply_journal()
+            task.run_cycle(self.db, start)
+        finally:
+            self.current = None
+        end = clock.now()
+        task.record(release, start, end)
+        for callback in self._after_cycle:
+            callback(task)

@@ -1,0 +1,182 @@
+"""The JSON Schema of `tagdb.yaml` (printed by `softplc schema`, used by `softplc check`).
+
+Structure is checked here; what a schema cannot say (a binding to a missing tag, an initial
+value outside its type, a program class that does not exist) is checked in `config.py`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from softplc.datatypes import TYPE_NAMES
+
+NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
+NAME_RULE = "letters, digits and _, not starting with a digit"
+
+DURATION: dict[str, Any] = {
+    "description": "A duration: 10ms, 1s, 2min, 250us, or a number of seconds.",
+    "type": ["string", "number"],
+}
+
+MODBUS_TAG: dict[str, Any] = {
+    "description": "Modbus TCP mapping overrides for this tag.",
+    "type": "object",
+    "properties": {
+        "table": {"enum": ["coil", "discrete_input", "holding", "input"], "description": "Register table."},
+        "address": {"type": "integer", "minimum": 0, "maximum": 65535, "description": "0-based start address."},
+        "scale": {"type": "number", "exclusiveMinimum": 0, "description": "Register = round(value * scale)."},
+        "register_type": {
+            "enum": ["int16", "uint16", "int32", "uint32", "float32", "float64"],
+            "description": "The register encoding when it differs from the tag's type (e.g. a scaled float in int16).",
+        },
+        "words": {"type": "integer", "minimum": 1, "maximum": 125, "description": "Registers for a string tag."},
+        "enabled": {"type": "boolean", "description": "false: not served over Modbus."},
+    },
+    "additionalProperties": False,
+}
+
+TAG: dict[str, Any] = {
+    "description": "A tag: a typed value with quality and timestamp.",
+    "type": "object",
+    "properties": {
+        "type": {"enum": list(TYPE_NAMES), "description": "The tag's data type."},
+        "initial": {"type": ["boolean", "number", "string"], "description": "Value at start (default 0, false or '')."},
+        "unit": {"type": "string", "description": "Engineering unit, e.g. m, %, items/min."},
+        "description": {"type": "string"},
+        "access": {"enum": ["rw", "ro"], "description": "ro: read-only for clients (programs may write)."},
+        "min": {"type": "number", "description": "Lowest value a write may set."},
+        "max": {"type": "number", "description": "Highest value a write may set."},
+        "retain": {"type": "boolean", "description": "Keep the value across restarts (stored in SQLite)."},
+        "group": {"type": "string", "description": "Folder path for browsing, e.g. Plant/Handshake."},
+        "modbus": MODBUS_TAG,
+    },
+    "required": ["type"],
+    "additionalProperties": False,
+}
+
+TAGS: dict[str, Any] = {
+    "type": "object",
+    "propertyNames": {"pattern": NAME_PATTERN},
+    "additionalProperties": TAG,
+}
+
+TEMPLATE: dict[str, Any] = {
+    "description": "A tag set declared once and instantiated per robot or task: tag NAME becomes INSTANCE_NAME.",
+    "type": "object",
+    "properties": {
+        "description": {"type": "string"},
+        "group": {"type": "string", "description": "Folder of the instances, e.g. Robots."},
+        "instances": {
+            "type": "array",
+            "items": {"type": "string", "pattern": NAME_PATTERN},
+            "description": "Instance names, e.g. [r01, r02, r03].",
+        },
+        "count": {"type": "integer", "minimum": 1, "maximum": 9999, "description": "Number of instances PREFIX01..PREFIXnn."},
+        "prefix": {"type": "string", "pattern": NAME_PATTERN, "description": "Instance name prefix used with count."},
+        "tags": TAGS,
+        "initial": {
+            "type": "object",
+            "description": "Per-instance initial values: {INSTANCE: {TAG: value}}.",
+            "additionalProperties": {"type": "object", "additionalProperties": {"type": ["boolean", "number", "string"]}},
+        },
+    },
+    "required": ["tags"],
+    "additionalProperties": False,
+}
+
+PROGRAM: dict[str, Any] = {
+    "description": "A program instance: a Program class and the binding of its variables to tags.",
+    "type": "object",
+    "properties": {
+        "name": {"type": "string", "description": "Instance name; may use {INSTANCE} with for_each."},
+        "program": {"type": "string", "description": "module:Class or module.Class, or path/to/file.py:Class."},
+        "for_each": {"type": "string", "description": "A template name: one instance per template instance."},
+        "bind": {
+            "type": "object",
+            "additionalProperties": {"type": ["string", "array"], "items": {"type": "string"}},
+            "description": "Variable → tag name (or list of tag names).",
+        },
+        "params": {"type": "object", "description": "Constant parameters of the program."},
+        "on_fault": {"enum": ["stop", "restart"], "description": "stop: stay FAULTED; restart: restart after restart_delay."},
+        "restart_delay": DURATION,
+        "max_restarts": {"type": "integer", "minimum": 0},
+        "enabled": {"type": "boolean"},
+    },
+    "required": ["name", "program"],
+    "additionalProperties": False,
+}
+
+TASK: dict[str, Any] = {
+    "description": "A cyclic task: its programs run every `interval`.",
+    "type": "object",
+    "properties": {
+        "interval": DURATION,
+        "priority": {"type": "integer", "minimum": 0, "maximum": 31, "description": "0 is the highest priority."},
+        "watchdog": DURATION,
+        "programs": {"type": "array", "items": PROGRAM},
+    },
+    "required": ["interval"],
+    "additionalProperties": False,
+}
+
+OPCUA_SERVER: dict[str, Any] = {
+    "type": "object",
+    "properties": {
+        "enabled": {"type": "boolean"},
+        "endpoint": {"type": "string", "description": "opc.tcp://HOST:PORT/PATH (default opc.tcp://127.0.0.1:4840/softplc/)."},
+        "namespace": {"type": "string", "description": "Namespace URI of the tags."},
+        "security": {
+            "type": "array",
+            "items": {"enum": ["None", "Basic256Sha256_Sign", "Basic256Sha256_SignAndEncrypt"]},
+            "description": "Security policies offered.",
+        },
+        "anonymous": {"enum": ["off", "viewer"], "description": "Anonymous sessions: refused, or read-only."},
+        "users_file": {"type": "string", "description": "Users and password hashes (softplc users ...)."},
+    },
+    "additionalProperties": False,
+}
+
+MODBUS_SERVER: dict[str, Any] = {
+    "type": "object",
+    "properties": {
+        "enabled": {"type": "boolean"},
+        "host": {"type": "string"},
+        "port": {"type": "integer", "minimum": 0, "maximum": 65535},
+        "unit_id": {"type": "integer", "minimum": 0, "maximum": 247},
+        "word_order": {"enum": ["big", "little"], "description": "Order of the 16-bit words of 32/64-bit values."},
+        "string_words": {"type": "integer", "minimum": 1, "maximum": 125, "description": "Registers per string tag."},
+    },
+    "additionalProperties": False,
+}
+
+CONFIG_SCHEMA: dict[str, Any] = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "$id": "https://softplc.dev/schema/tagdb.json",
+    "title": "softplc plant configuration (tagdb.yaml)",
+    "type": "object",
+    "properties": {
+        "version": {"const": 1, "description": "Format version; 1."},
+        "plant": {
+            "type": "object",
+            "properties": {"name": {"type": "string"}, "description": {"type": "string"}},
+            "additionalProperties": False,
+        },
+        "templates": {"type": "object", "propertyNames": {"pattern": NAME_PATTERN}, "additionalProperties": TEMPLATE},
+        "tags": TAGS,
+        "tasks": {"type": "object", "propertyNames": {"pattern": NAME_PATTERN}, "additionalProperties": TASK},
+        "servers": {
+            "type": "object",
+            "properties": {"opcua": OPCUA_SERVER, "modbus": MODBUS_SERVER},
+            "additionalProperties": False,
+        },
+        "runtime": {
+            "type": "object",
+            "properties": {
+                "state_dir": {"type": "string", "description": "Where retained values, certificates etc. live (default .softplc next to this file)."},
+                "stall_after": DURATION,
+            },
+            "additionalProperties": False,
+        },
+    },
+    "additionalProperties": False,
+}
