@@ -35,6 +35,10 @@ class Clock(ABC):
     async def sleep(self, seconds: float) -> None:
         await self.sleep_until(self.now() + max(0.0, seconds))
 
+    def monotonic(self) -> float:
+        """System-wide monotonic seconds now, comparable across processes (simulated: `now()`)."""
+        return self.now()
+
     @abstractmethod
     async def run_blocking(self, function: Callable[..., T], *args: Any) -> T:
         """Run blocking work (e.g. path planning) without stalling the clock's consumers."""
@@ -62,6 +66,11 @@ class RealClock(Clock):
 
     def wall(self) -> float:
         return self._wall_origin + self.now()
+
+    def monotonic(self) -> float:
+        # time.monotonic() is one clock for every process on the machine (CLOCK_MONOTONIC on
+        # Linux), so another process can subtract its own readings from it.
+        return time.monotonic()
 
     async def sleep_until(self, deadline: float) -> None:
         remaining = deadline - self.now()
