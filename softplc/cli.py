@@ -119,7 +119,8 @@ def _configure_logging(verbosity: int) -> None:
             logging.getLogger(noisy).setLevel(logging.WARNING)
 
 
-def _print_problems(error: ConfigError, stream: TextIO = sys.stderr) -> None:
+def _print_problems(error: ConfigError, stream: TextIO | None = None) -> None:
+    stream = stream or sys.stderr  # looked up at call time, so redirections are honoured
     for problem in error.problems:
         print(problem, file=stream)
     count = len(error.problems)
@@ -179,8 +180,9 @@ def cmd_tags(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def print_table(rows: list[list[str]], header: tuple[str, ...] | list[str], stream: TextIO = sys.stdout) -> None:
+def print_table(rows: list[list[str]], header: tuple[str, ...] | list[str], stream: TextIO | None = None) -> None:
     """Print rows as an aligned plain-text table."""
+    stream = stream or sys.stdout
     widths = [max([len(h)] + [len(row[i]) for row in rows]) for i, h in enumerate(header)]
     print("  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip(), file=stream)
     print("  ".join("-" * w for w in widths), file=stream)

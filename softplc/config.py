@@ -123,13 +123,31 @@ _TYPE_WORDS = {"object": "a mapping", "array": "a list", "string": "a string", "
                "integer": "an integer", "boolean": "true or false", "null": "null"}
 
 
-def _schema_problems(data: Any, source: SourceMap) -> list[Problem]:
-    validator = jsonschema.Draft202012Validator(CONFIG_SCHEMA)
+def _schema_problems(data: Any, source: SourceMap) -> tuple[list[Problem], set[tuple[Any, ...]]]:
+    return _schema_check(data, source, CONFIG_SCHEMA)
+
+
+def schema_problems(data: Any, source: SourceMap, schema: dict[str, Any]) -> list[Problem]:
+    """Check `data` against a JSON Schema; each violation becomes a located, readable Problem."""
+    return _schema_check(data, source, schema)[0]
+
+
+def _schema_check(data: Any, source: SourceMap, schema: dict[str, Any]) -> tuple[list[Problem], set[tuple[Any, ...]]]:
+    """The schema's problems, and the paths they are about (semantic checks skip those)."""
+    validator = jsonschema.Draft202012Validator(schema)
     problems: list[Problem] = []
+    paths: set[tuple[Any, ...]] = set()
     for error in validator.iter_errors(data):
         path = tuple(error.absolute_path)
+        if "propertyNames" in error.absolute_schema_path:
+            path = (*path, error.instance)  # the error is about a key: point at that key
+        if error.validator == "additionalProperties" and isinstance(error.instance, dict):
+            known = error.schema.get("properties", {})
+            paths.update((*path, key) for key in error.instance if key not in known)
+        else:
+            paths.add(path)
         problems.extend(_translate(error, path, source))
-    return problems
+    return problems, paths
 
 
 def _translate(error: jsonschema.ValidationError, path: tuple[Any, ...], source: SourceMap) -> list[Problem]:
@@ -150,15 +168,17 @@ def _translate(error: jsonschema.ValidationError, path: tuple[Any, ...], source:
     if kind == "enum":
         choices = [str(choice) for choice in error.validator_value]
         value = error.instance
-        what = "type" if path and path[-1] == "type" else f"value for {where}"
+        shown = f"'{value}'" if isinstance(value, str) else _describe(value)
+        what = f"type {shown}" if path and path[-1] == "type" else f"value {shown} for {where}"
         hint = did_you_mean(str(value), choices)
-        return [source.problem(path, f"unknown {what} {_describe(value)}{hint}; expected one of: {', '.join(choices)}")]
+        return [source.problem(path, f"unknown {what}{hint}; expected one of: {', '.join(choices)}")]
     if kind == "type":
         expected = error.validator_value
         expected_words = " or ".join(_TYPE_WORDS.get(t, t) for t in ([expected] if isinstance(expected, str) else expected))
         return [source.problem(path, f"{where} must be {expected_words}, not {_describe(error.instance)}")]
-    if kind == "pattern" or (kind == "propertyNames"):
-        return [source.problem(path, f"invalid name '{error.instance}' ({NAME_RULE})", at_key=True)]
+    if kind == "pattern":
+        is_key = "propertyNames" in error.absolute_schema_path
+        return [source.problem(path, f"invalid name '{error.instance}' ({NAME_RULE})", at_key=is_key)]
     if kind == "const":
         return [source.problem(path, f"{where} must be {error.validator_value!r}, not {_describe(error.instance)}")]
     if kind in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
@@ -179,18 +199,20 @@ class _Checker:
         self.tags: dict[str, TagDef] = {}
         self.tag_paths: dict[str, tuple[Any, ...]] = {}
         self.instances: dict[str, list[str]] = {}
+        self.schema_paths: set[tuple[Any, ...]] = set()
 
     def problem(self, path: Sequence[Any], message: str, *, at_key: bool = False) -> None:
+        if tuple(path) in self.schema_paths:
+            return  # the schema already explained what is wrong here; say it once
         self.problems.append(self.source.problem(path, message, at_key=at_key))
 
     def check(self) -> PlantConfig:
         data = self.data
         if data is None:
-            data = {}
+            raise ConfigError([self.source.problem((), "the file is empty: expected a plant configuration (version, tags, tasks...)")])
         if not isinstance(data, dict):
             raise ConfigError([self.source.problem((), f"the file must be a mapping of sections, not {_describe(data)}")])
-        self.data = data
-        schema_problems = _schema_problems(data, self.source)
+        schema_problems, self.schema_paths = _schema_problems(data, self.source)
         self.problems.extend(schema_problems)
         # Semantic checks run on whatever is well-formed, so one pass reports as much as possible.
         self._check_templates(data.get("templates"))
@@ -262,6 +284,7 @@ class _Checker:
                     continue
                 if instance in seen:
                     self.problem((*base, "instances", index), f"duplicate instance '{instance}'")
+                    continue
                 seen.add(instance)
                 result.append(instance)
             return result
@@ -321,6 +344,8 @@ class _Checker:
             initial, initial_path = initial_override
         else:
             initial, initial_path = spec.get("initial", data_type.default), (*path, "initial")
+        # Without an `initial` the tag starts at its type's default, which may break min/max.
+        hint = "" if initial_override is not None or "initial" in spec else f" (no 'initial' is given, so it starts at {data_type.default}: add one)"
         try:
             initial = data_type.coerce(initial)
         except TypeMismatch as error:
@@ -329,10 +354,10 @@ class _Checker:
         else:
             if data_type.is_numeric and ok:
                 if isinstance(low, (int, float)) and initial < low:
-                    self.problem(initial_path, f"initial value {initial} of '{name}' is below its min {low}")
+                    self.problem(initial_path, f"initial value {initial} of '{name}' is below its min {low}{hint}")
                     ok = False
                 if isinstance(high, (int, float)) and initial > high:
-                    self.problem(initial_path, f"initial value {initial} of '{name}' is above its max {high}")
+                    self.problem(initial_path, f"initial value {initial} of '{name}' is above its max {high}{hint}")
                     ok = False
         if not ok:
             return
@@ -355,6 +380,9 @@ class _Checker:
     # -- tasks and programs -------------------------------------------------------------
 
     def _duration(self, value: Any, path: tuple[Any, ...], what: str) -> float | None:
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and value <= 0:
+            self.problem(path, f"bad {what} {value!r}: must be greater than zero")
+            return None
         try:
             seconds = parse_duration(value)
         except (ValueError, TypeError):
@@ -540,6 +568,9 @@ def import_program(reference: str, base_dir: Path) -> type[Program]:
             if base not in sys.path:
                 sys.path.insert(0, base)
             module = importlib.import_module(module_name)
+    except ModuleNotFoundError as error:
+        where = f"{base_dir.resolve()} (the configuration's folder) or the installed packages"
+        raise ImportError(f"cannot load program '{reference}': no module named '{error.name}' in {where}") from None
     except Exception as error:  # user code may raise anything while importing
         raise ImportError(f"cannot load program '{reference}': {type(error).__name__}: {error}") from None
     cls = getattr(module, class_name, None)

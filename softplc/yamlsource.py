@@ -130,6 +130,10 @@ def parse_yaml(text: str, file: str = "<string>") -> tuple[Any, SourceMap]:
         message = error.problem or str(error)
         if error.context:
             message = f"{error.context}: {message}"
+        context = error.context_mark
+        if context is not None and mark is not None and context.line != mark.line:
+            # The mistake is often where the construct began (an unclosed '{' or quote).
+            message += f" (the construct began at line {context.line + 1}, column {context.column + 1})"
         raise ConfigError([Problem(location, f"YAML syntax error: {message}")]) from None
     except yaml.YAMLError as error:
         raise ConfigError([Problem(Location(file, 1, 1), f"YAML error: {error}")]) from None
