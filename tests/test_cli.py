@@ -1,0 +1,302 @@
+"""The command line: check, tags, schema, run (--until, --loop, --speed, Ctrl-C), --help."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import queue
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import jsonschema
+import pytest
+import yaml
+
+from softplc.cli import main
+from softplc.config import load_config
+
+from conftest import REPO
+
+SOFTPLC = str(Path(sys.executable).parent / "softplc")
+PROGRAMS = REPO / "tests" / "configs" / "sample_programs.py"
+
+PLANT = f"""
+version: 1
+plant: {{name: cli-test}}
+templates:
+  line:
+    instances: [l1, l2]
+    tags:
+      a: {{type: float64, initial: 1, unit: m}}
+      b: {{type: float64, initial: 2}}
+      total: {{type: float64, access: ro}}
+      scans: {{type: uint32}}
+tags:
+  flag: {{type: bool, description: "a, flag"}}
+tasks:
+  fast:
+    interval: 10ms
+    programs:
+      - name: sum_{{line}}
+        program: {PROGRAMS}:Summer
+        for_each: line
+        bind: {{parts: ["{{line}}_a", "{{line}}_b"], total: "{{line}}_total", scans: "{{line}}_scans"}}
+  slow:
+    interval: 1s
+    priority: 20
+"""
+
+
+@pytest.fixture
+def plant(tmp_path: Path) -> Path:
+    path = tmp_path / "plant.yaml"
+    path.write_text(PLANT)
+    return path
+
+
+@pytest.fixture
+def cli(capsys: pytest.CaptureFixture[str]) -> Iterator[Callable[..., tuple[int, str, str]]]:
+    """Run `softplc ARGS` in-process; returns (exit code, stdout, stderr). Restores logging."""
+    root = logging.getLogger()
+    handlers, level = root.handlers[:], root.level
+
+    def run(*args: str) -> tuple[int, str, str]:
+        code = main([str(arg) for arg in args])
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    yield run
+    root.handlers[:] = handlers
+    root.setLevel(level)
+
+
+def statistics(output: str) -> dict[str, list[str]]:
+    """The per-task statistics table printed on exit: task name → its columns."""
+    lines = output.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("task ") and "interval" in line)
+    rows = {}
+    for line in lines[start + 2:]:
+        if not line.strip() or line.startswith("program "):
+            break
+        rows[line.split()[0]] = line.split()
+    return rows
+
+
+# -- check / tags / schema ------------------------------------------------------------------
+
+
+def test_check_prints_a_one_line_summary(cli, plant: Path) -> None:
+    code, out, err = cli("check", plant)
+    assert code == 0
+    assert out == f"{plant}: OK — 9 tags, 2 tasks (fast 10ms, slow 1s), 2 programs\n"
+
+
+def test_check_default_plant_from_its_folder() -> None:
+    result = subprocess.run([SOFTPLC, "check"], capture_output=True, text=True, cwd=REPO, timeout=60)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("tagdb.yaml: OK — ")
+    config = load_config(REPO / "tagdb.yaml")
+    assert f"{len(config.tags)} tags, {len(config.tasks)} tasks" in lines[0]
+
+
+def test_tags_json_csv_table(cli, plant: Path) -> None:
+    code, out, _ = cli("tags", plant, "--format", "json")
+    assert code == 0
+    rows = json.loads(out)
+    by_name = {row["name"]: row for row in rows}
+    assert list(by_name)[:9] == ["l1_a", "l1_b", "l1_total", "l1_scans", "l2_a", "l2_b", "l2_total", "l2_scans", "flag"]
+    assert by_name["l1_a"] == {
+        "name": "l1_a", "type": "float64", "initial": 1.0, "unit": "m", "access": "rw", "min": None,
+        "max": None, "retain": False, "group": "Lines/l1", "description": "",
+    }
+    assert by_name["l2_total"]["access"] == "ro"
+    # system tags are listed too, unless --no-system
+    assert "_sys.state" in by_name and "_sys.fast.latency_ms_p99" in by_name and "_sys.fast.sum_l2.state" in by_name
+    _, out, _ = cli("tags", plant, "--format", "json", "--no-system")
+    assert [row["name"] for row in json.loads(out)] == list(by_name)[:9]
+
+    code, out, _ = cli("tags", plant, "--format", "csv")
+    assert code == 0
+    csv_rows = list(csv.DictReader(io.StringIO(out)))
+    assert [row["name"] for row in csv_rows] == list(by_name)
+    assert csv_rows[8]["description"] == "a, flag"  # quoted properly
+    assert csv_rows[0]["initial"] == "1.0"
+
+    code, out, _ = cli("tags", plant, "--no-system")
+    assert code == 0
+    lines = out.splitlines()
+    assert lines[0].split() == ["name", "type", "initial", "unit", "access", "min", "max", "group", "description"]
+    assert set(lines[1]) == {"-", " "}
+    assert len(lines) == 2 + 9
+    assert lines[2].split() == ["l1_a", "float64", "1.0", "m", "rw", "Lines/l1"]
+
+
+def test_schema_command_prints_a_valid_json_schema_the_default_plant_meets(cli) -> None:
+    code, out, _ = cli("schema")
+    assert code == 0
+    schema = json.loads(out)
+    jsonschema.Draft202012Validator.check_schema(schema)
+    plant = yaml.safe_load((REPO / "tagdb.yaml").read_text())
+    jsonschema.Draft202012Validator(schema).validate(plant)
+
+
+@pytest.mark.parametrize("command", [[], ["run"], ["check"], ["tags"], ["schema"]])
+def test_help_everywhere(cli, command: list[str]) -> None:
+    with pytest.raises(SystemExit) as exited:
+        cli(*command, "--help")
+    assert exited.value.code == 0
+
+
+def test_run_help_mentions_loop_choice(capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    assert "--loop {asyncio,uvloop}" in capsys.readouterr().out
+
+
+# -- run: --until, --speed, --loop ----------------------------------------------------------
+
+
+def test_run_until_a_tag_condition(cli, plant: Path, tmp_path: Path) -> None:
+    code, _, err = cli("run", plant, "--sim", "--until", "l1_scans >= 25 and l2_total == 3", "--no-status", "--state-dir", tmp_path)
+    assert code == 0, err
+    # cycles at 0, 10, ..., 240 ms: the 25th ends the run at 0.24 s
+    assert "stopped: condition met: l1_scans >= 25 and l2_total == 3 — runtime clock 0.2 s" in err
+    assert statistics(err)["fast"][2] == "25"
+
+
+def test_run_until_a_system_tag(cli, plant: Path, tmp_path: Path) -> None:
+    code, _, err = cli("run", plant, "--sim", "--until", "_sys.fast.cycles >= 30", "--no-status", "--state-dir", tmp_path)
+    assert code == 0, err
+    # system tags are published every 0.5 s, so the condition is seen at 0.5 s
+    assert "stopped: condition met: _sys.fast.cycles >= 30 — runtime clock 0.5 s" in err
+
+
+@pytest.mark.parametrize(
+    ("until", "message"),
+    [
+        ("l1_scan >= 3", "softplc: --until: unknown tag 'l1_scan' in condition (did you mean 'l1_scans'?)"),
+        ("_sys.fast.cycle > 3", "softplc: --until: unknown tag '_sys.fast.cycle' in condition (did you mean '_sys.fast.cycles'?)"),
+        ("l1_scans >=", "softplc: --until: cannot parse 'l1_scans >=': invalid syntax"),
+        ("__import__('os')", "softplc: --until: not allowed in a condition: \"__import__('os')\""),
+    ],
+)
+def test_run_until_errors(cli, plant: Path, until: str, message: str) -> None:
+    code, _, err = cli("run", plant, "--sim", "--until", until)
+    assert code == 1
+    assert err.strip() == message
+
+
+def test_speed_needs_sim_and_must_be_positive(cli, plant: Path) -> None:
+    code, _, err = cli("run", plant, "--speed", "10", "--duration", "1")
+    assert code == 1 and "--speed needs --sim" in err
+    code, _, err = cli("run", plant, "--sim", "--speed", "0", "--duration", "1")
+    assert code == 1 and "--speed must be positive" in err
+
+
+@pytest.mark.parametrize("loop", ["asyncio", "uvloop"])
+def test_run_on_either_event_loop(cli, plant: Path, tmp_path: Path, loop: str) -> None:
+    code, _, err = cli("run", plant, "--sim", "--duration", "2", "--loop", loop, "--no-status", "--state-dir", tmp_path)
+    assert code == 0, err
+    assert f"{loop} event loop" in err.splitlines()[0]
+    assert statistics(err)["fast"][2] == "200"  # 0, 10, ..., 1990 ms
+
+
+# -- run as a real process: Ctrl-C and the default plant ------------------------------------
+
+
+class Process:
+    """A `softplc` subprocess whose merged output is read line by line in a thread."""
+
+    def __init__(self, args: list[str], cwd: Path) -> None:
+        self.popen = subprocess.Popen(
+            [SOFTPLC, *args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
+        self.lines: list[str] = []
+        self._queue: queue.Queue[str | None] = queue.Queue()
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        assert self.popen.stdout is not None
+        for line in self.popen.stdout:
+            self._queue.put(line.rstrip("\n"))
+        self._queue.put(None)
+
+    def wait_for(self, text: str, timeout: float) -> None:
+        """Wait until a line containing `text` has been printed."""
+        deadline = time.monotonic() + timeout
+        while not any(text in line for line in self.lines):
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise AssertionError(f"no line with {text!r} within {timeout} s; output so far: {self.lines}")
+            try:
+                line = self._queue.get(timeout=remaining)
+            except queue.Empty:
+                continue
+            if line is None:
+                raise AssertionError(f"process ended before printing {text!r}: {self.lines}")
+            self.lines.append(line)
+
+    def finish(self, timeout: float) -> int:
+        code = self.popen.wait(timeout=timeout)
+        while (line := self._queue.get(timeout=timeout)) is not None:
+            self.lines.append(line)
+        return code
+
+    def kill(self) -> None:
+        if self.popen.poll() is None:
+            self.popen.kill()
+            self.popen.wait()
+
+
+@pytest.mark.parametrize("loop", ["asyncio", "uvloop"])
+def test_ctrl_c_stops_cleanly_and_prints_statistics(plant: Path, tmp_path: Path, loop: str) -> None:
+    process = Process(["run", str(plant), "--no-status", "--loop", loop, "--state-dir", str(tmp_path)], tmp_path)
+    try:
+        process.wait_for("press Ctrl-C to stop", timeout=30)
+        process.popen.send_signal(signal.SIGINT)
+        code = process.finish(timeout=30)
+    finally:
+        process.kill()
+    output = "\n".join(process.lines)
+    assert code == 0, output
+    assert "Traceback" not in output
+    assert "stopped: interrupted (Ctrl-C)" in output
+    header = next(line for line in process.lines if line.startswith("task "))
+    assert "latency ms min/mean/p99/max" in header and "overruns" in header
+    rows = statistics(output)
+    assert set(rows) == {"fast", "slow"}
+    assert rows["fast"][1] == "10ms" and int(rows["fast"][2]) >= 1
+
+
+def test_default_plant_runs_600_simulated_seconds(tmp_path: Path) -> None:
+    started = time.monotonic()
+    # --no-servers: the default plant's servers use fixed ports, which parallel tests may hold
+    process = Process(["run", "--sim", "--duration", "600", "--no-servers", "--no-status", "--state-dir", str(tmp_path)], REPO)
+    try:
+        code = process.finish(timeout=120)
+    finally:
+        process.kill()
+    wall = time.monotonic() - started
+    output = "\n".join(process.lines)
+    print(f"softplc run --sim --duration 600 (default plant, --no-servers): {wall:.1f} s wall time")
+    assert code == 0, output
+    assert "stopped: duration of 600 s reached — runtime clock 600.0 s" in output
+    config = load_config(REPO / "tagdb.yaml")
+    for task in config.tasks:
+        cycles = round(600 / task.interval)
+        row = statistics(output)[task.name]
+        assert int(row[2]) == cycles and int(row[3]) == 0  # every release ran, no overruns
+
+
+def test_plant_file_is_dedented() -> None:
+    # guards the PLANT text above: YAML indentation is significant
+    assert textwrap.dedent(PLANT) == PLANT
