@@ -118,6 +118,9 @@ class TagDatabase:
             coerced = definition.type.coerce(value)
         except TypeMismatch as error:
             raise WriteRejected(name, Rule.TYPE_MISMATCH, str(error)) from None
+        if (definition.min is not None or definition.max is not None) and coerced != coerced:
+            # NaN compares false with every bound, so it would slip past both checks below.
+            raise WriteRejected(name, Rule.OUT_OF_RANGE, "NaN is outside the range of a bounded tag")
         if definition.min is not None and coerced < definition.min:
             raise WriteRejected(name, Rule.OUT_OF_RANGE, f"{coerced} is below the minimum {definition.min}")
         if definition.max is not None and coerced > definition.max:

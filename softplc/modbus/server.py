@@ -1,0 +1,193 @@
+"""The Modbus TCP adapter: serves the tag database through pymodbus 3.16 (SimDevice datastore).
+
+Reads return the tag database's current values (the register image is refreshed on every
+read). Writes are decoded per tag, validated with `db.validate` exactly like an OPC UA write,
+and only if every tag of the request is valid are they submitted with `db.submit` (applied at
+the next cycle boundary). Exception codes (see docs/modbus.md):
+
+    02 illegal data address  unmapped address, read-only tag, a write covering part of a value
+    03 illegal data value    bad quantity, wrong type (e.g. 2 for a bool), outside min/max, bad string
+    04 server device failure an internal error while serving the request (logged)
+    0B gateway no response   a unit id other than servers.modbus.unit_id
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+from collections.abc import Callable
+from typing import Any
+
+from pymodbus.constants import ExcCodes
+from pymodbus.server import ModbusTcpServer
+from pymodbus.simulator import DataType as SimType
+from pymodbus.simulator import SimData, SimDevice
+
+from softplc.config import PlantConfig
+from softplc.modbus.address_map import AddressMap, Table, build_address_map
+from softplc.modbus.codec import CodecError
+from softplc.modbus.image import RegisterImage
+from softplc.modbus.requests import LIMITS, RequestGuard, guarded_requests
+from softplc.modbus.settings import ModbusSettings
+from softplc.runtime import AdapterError, Runtime
+from softplc.tagdb import Rule, TagDatabase, WriteRejected
+
+log = logging.getLogger(__name__)
+
+EXCEPTION_FOR_RULE: dict[Rule, ExcCodes] = {
+    Rule.UNKNOWN_TAG: ExcCodes.ILLEGAL_ADDRESS,
+    # A read-only tag is "not an allowable address" for a write (what PLCs answer, and what
+    # pymodbus itself answers for readonly registers); 04 would claim the server failed.
+    Rule.READ_ONLY: ExcCodes.ILLEGAL_ADDRESS,
+    Rule.TYPE_MISMATCH: ExcCodes.ILLEGAL_VALUE,
+    Rule.OUT_OF_RANGE: ExcCodes.ILLEGAL_VALUE,
+}
+# The read that pymodbus does after FC5/FC6 builds the echo of the request: leave the
+# just-written words in place instead of refreshing them from the (not yet applied) tag.
+_ECHO_READS = (5, 6)
+WRITE_SOURCE = "modbus"
+
+
+class ModbusAdapter:
+    """Modbus TCP server over the tag database (one unit id, four tables)."""
+
+    name = "modbus"
+
+    def __init__(self, config: PlantConfig, settings: ModbusSettings | None = None) -> None:
+        self.settings = settings or ModbusSettings.from_servers(config.servers)
+        # Built now so a bad map is a configuration error before anything starts.
+        self.map: AddressMap = build_address_map(config, self.settings)
+        self.port: int | None = None
+        self._server: ModbusTcpServer | None = None
+        self._image: RegisterImage | None = None
+        self._db: TagDatabase | None = None
+        self._unsubscribe: Callable[[], None] | None = None
+
+    @property
+    def host(self) -> str:
+        return self.settings.host
+
+    async def start(self, runtime: Runtime) -> None:
+        db = runtime.db
+        missing = [mapping.name for mapping in self.map.mappings if mapping.name not in db]
+        if missing:
+            raise AdapterError(f"Modbus map names tags the runtime does not have: {', '.join(missing[:5])}")
+        self._db = db
+        self._image = RegisterImage(self.map, db)
+        self._unsubscribe = db.on_change(self._image.note_changed)
+        settings = self.settings
+        device = SimDevice(settings.unit_id, simdata=self._simdata(), action=self._action)
+        guard = RequestGuard(self.map, settings.unit_id)
+        _probe_port(settings.host, settings.port)
+        server = ModbusTcpServer(device, address=(settings.host, settings.port), custom_pdu=guarded_requests(guard))
+        try:
+            await server.serve_forever(background=True)
+        except (RuntimeError, OSError) as error:
+            self._stop_watching()
+            raise AdapterError(f"Modbus TCP cannot listen on {settings.host}:{settings.port}: {error}") from None
+        self._server = server
+        sockets = getattr(server.transport, "sockets", None) or []
+        self.port = sockets[0].getsockname()[1] if sockets else settings.port
+        log.debug("Modbus TCP serving %d tags on %s:%s unit %d", len(self.map), settings.host, self.port, settings.unit_id)
+
+    async def stop(self) -> None:
+        self._stop_watching()
+        server, self._server = self._server, None
+        if server is not None:
+            await server.shutdown()
+
+    def describe(self) -> str:
+        counts = ", ".join(f"{sum(m.words for m in self.map.in_table(t))} {t.plural}" for t in Table)
+        where = f"{self.settings.host}:{self.port if self.port is not None else self.settings.port}"
+        return f"Modbus TCP on {where} unit {self.settings.unit_id} ({len(self.map)} tags: {counts}; see softplc modbus-map)"
+
+    def _stop_watching(self) -> None:
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+
+    def _simdata(self) -> tuple[list[SimData], list[SimData], list[SimData], list[SimData]]:
+        """One SimData per contiguous mapped run of each table (gaps stay invalid → 02)."""
+        blocks: list[list[SimData]] = []
+        for table in (Table.COIL, Table.DISCRETE_INPUT, Table.HOLDING, Table.INPUT):
+            runs = self.map.runs(table)
+            if table.is_bit:
+                entries = [SimData(start, values=[False] * length, datatype=SimType.BITS) for start, length in runs]
+                # pymodbus needs at least one entry; the request guard rejects every address of an empty table.
+                blocks.append(entries or [SimData(0, values=[False], datatype=SimType.BITS)])
+            else:
+                entries = [SimData(start, values=[0] * length, datatype=SimType.REGISTERS) for start, length in runs]
+                blocks.append(entries or [SimData(0, datatype=SimType.INVALID)])
+        return blocks[0], blocks[1], blocks[2], blocks[3]
+
+    async def _action(
+        self, function_code: int, start: int, address: int, count: int, registers: list[int], values: list[Any] | None
+    ) -> ExcCodes | None:
+        """SimDevice hook, called before pymodbus reads or writes its register block."""
+        try:
+            table = LIMITS[function_code][0]
+            if values is None:
+                if function_code not in _ECHO_READS:
+                    self._refresh(table, start, address, count, registers)
+                return None
+            return self._write(table, address, list(values))
+        except Exception:  # never let one request take the server down; say what happened
+            log.exception("Modbus request (function %d, address %d) failed", function_code, address)
+            return ExcCodes.DEVICE_FAILURE
+
+    def _refresh(self, table: Table, start: int, address: int, count: int, registers: list[int]) -> None:
+        assert self._image is not None
+        # For coils and discrete inputs pymodbus passes the 16-bit word index of its block and
+        # the number of words the request touches.
+        first = address // 16 if table.is_bit else address
+        self._image.refresh(table, first, count, registers, first - start)
+
+    def _write(self, table: Table, address: int, values: list[Any]) -> ExcCodes | None:
+        """Validate every tag the write covers; submit them all, or nothing."""
+        assert self._db is not None
+        db = self._db
+        end = address + len(values)
+        mappings = self.map.covering(table, address, len(values))
+        if mappings is None:
+            return ExcCodes.ILLEGAL_ADDRESS
+        items: list[tuple[str, Any]] = []
+        for mapping in mappings:
+            if mapping.address < address or mapping.end > end:
+                log.debug("Modbus write %s %d..%d covers part of %s (%d..%d): rejected",
+                          table.value, address, end - 1, mapping.name, mapping.address, mapping.end - 1)
+                return ExcCodes.ILLEGAL_ADDRESS
+            words = values[mapping.address - address : mapping.end - address]
+            try:
+                value = bool(words[0]) if mapping.codec is None else mapping.codec.decode(words)
+            except CodecError as error:
+                log.debug("Modbus write to %s rejected: %s", mapping.name, error)
+                return ExcCodes.ILLEGAL_VALUE
+            try:
+                items.append((mapping.name, db.validate(mapping.name, value)))
+            except WriteRejected as rejected:
+                log.debug("Modbus write rejected: %s", rejected)
+                return EXCEPTION_FOR_RULE[rejected.rule]
+        # Everything was validated just now, with no await in between: submit cannot reject.
+        for result in db.submit(items, WRITE_SOURCE):
+            if result is not None:
+                log.error("Modbus write rejected after validation: %s", result)
+                return EXCEPTION_FOR_RULE[result.rule]
+        return None
+
+
+def _probe_port(host: str, port: int) -> None:
+    """Raise AdapterError with the OS's reason if (host, port) cannot be bound (pymodbus hides it)."""
+    if port == 0:
+        return
+    try:
+        infos = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except socket.gaierror as error:
+        raise AdapterError(f"Modbus TCP host {host!r}: {error}") from None
+    family, kind, proto, _, address = infos[0]
+    with socket.socket(family, kind, proto) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as asyncio's server does
+        try:
+            probe.bind(address)
+        except OSError as error:
+            reason = "port in use" if error.errno in (98, 48) else error.strerror or str(error)
+            raise AdapterError(f"Modbus TCP cannot listen on {host}:{port}: {reason} ({error})") from None
