@@ -15,6 +15,11 @@ from softplc.clock import Clock
 # The IEC names are kept on purpose (TON, IN, PT, Q, ET, CU, PV, CV): PLC engineers know them.
 # ruff: noqa: N802, N803, N815
 
+# Clock times are sums of floats (origin + k * interval), so "PT has elapsed" is decided with a
+# tolerance; otherwise 8.0 - 6.000000000000001 < 2.0 would delay Q by a whole scan. 1 µs is far
+# below the shortest task interval (100 µs) and far above float rounding over months of runtime.
+_TOLERANCE = 1e-6
+
 
 class TON:
     """On-delay timer: Q becomes true PT seconds after IN became true; ET is elapsed time."""
@@ -39,8 +44,9 @@ class TON:
         now = self._clock.now()
         if self._start is None:
             self._start = now
-        self.ET = min(now - self._start, self.PT)
-        self.Q = now - self._start >= self.PT
+        elapsed = now - self._start
+        self.Q = elapsed >= self.PT - _TOLERANCE
+        self.ET = self.PT if self.Q else elapsed
         return self.Q
 
 
@@ -69,9 +75,11 @@ class TOF:
         now = self._clock.now()
         if self._fall is None:
             self._fall = now
-        self.ET = min(now - self._fall, self.PT)
-        if now - self._fall >= self.PT:
+        elapsed = now - self._fall
+        self.ET = min(elapsed, self.PT)
+        if elapsed >= self.PT - _TOLERANCE:
             self.Q = False
+            self.ET = self.PT
         return self.Q
 
 
@@ -97,7 +105,7 @@ class TP:
         self.IN = IN
         if self._start is not None:
             elapsed = now - self._start
-            if elapsed < self.PT:
+            if elapsed < self.PT - _TOLERANCE:
                 self.Q = True
                 self.ET = elapsed
             else:
