@@ -10,6 +10,7 @@ import difflib
 import importlib
 import importlib.util
 import inspect
+import re
 import sys
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -22,9 +23,9 @@ from softplc.datatypes import DataType, TypeMismatch
 from softplc.durations import parse_duration
 from softplc.program import Program
 from softplc.scan import RestartPolicy
-from softplc.schema import CONFIG_SCHEMA, NAME_RULE
+from softplc.schema import CONFIG_SCHEMA, NAME_PATTERN, NAME_RULE
 from softplc.tags import Access, TagDef
-from softplc.yamlsource import ConfigError, Problem, SourceMap, load_yaml, parse_yaml
+from softplc.yamlsource import ConfigError, Location, Problem, SourceMap, load_yaml, parse_yaml
 
 SYSTEM_PREFIX = "_sys."
 
@@ -200,6 +201,8 @@ class _Checker:
         self.tag_paths: dict[str, tuple[Any, ...]] = {}
         self.instances: dict[str, list[str]] = {}
         self.schema_paths: set[tuple[Any, ...]] = set()
+        # template → instance → tag → (initial value, where it is written), from instances_from
+        self.external_initial: dict[str, dict[str, dict[str, tuple[Any, Location]]]] = {}
 
     def problem(self, path: Sequence[Any], message: str, *, at_key: bool = False) -> None:
         if tuple(path) in self.schema_paths:
@@ -258,17 +261,23 @@ class _Checker:
                     if tag_name not in tag_specs:
                         self.problem((*base, "initial", instance, tag_name), f"template '{template_name}' has no tag '{tag_name}'{did_you_mean(tag_name, tag_specs)}", at_key=True)
             group_root = template.get("group", template_name.capitalize() + "s")
+            external = self.external_initial.get(template_name, {})
             for instance in instances:
                 instance_overrides = overrides.get(instance) if isinstance(overrides.get(instance), dict) else {}
+                from_file = external.get(instance, {})
                 for tag_name, spec in tag_specs.items():
                     full_name = f"{instance}_{tag_name}"
-                    initial_path = (*base, "initial", instance, tag_name) if tag_name in instance_overrides else None
+                    override: tuple[Any, tuple[Any, ...] | Location] | None = None
+                    if tag_name in instance_overrides:
+                        override = (instance_overrides[tag_name], (*base, "initial", instance, tag_name))
+                    elif tag_name in from_file:
+                        override = from_file[tag_name]
                     self._add_tag(
                         full_name,
                         spec,
                         (*base, "tags", tag_name),
                         default_group=f"{group_root}/{instance}",
-                        initial_override=(instance_overrides[tag_name], initial_path) if initial_path else None,
+                        initial_override=override,
                     )
 
     def _template_instances(self, name: str, template: dict[str, Any], base: tuple[Any, ...]) -> list[str]:
@@ -276,6 +285,10 @@ class _Checker:
         count = template.get("count")
         if explicit is not None and count is not None:
             self.problem((*base, "count"), "give either 'instances' or 'count', not both", at_key=True)
+        if "instances_from" in template:
+            if explicit is not None or count is not None:
+                self.problem((*base, "instances_from"), "give only one of 'instances', 'count' or 'instances_from'", at_key=True)
+            return self._instances_from(name, template, base)
         if isinstance(explicit, list):
             seen: set[str] = set()
             result = []
@@ -293,8 +306,87 @@ class _Checker:
             width = max(2, len(str(count)))
             return [f"{prefix}{index:0{width}d}" for index in range(1, count + 1)]
         if explicit is None and count is None:
-            self.problem(base, f"template '{name}' needs 'instances' (a list of names) or 'count'", at_key=True)
+            self.problem(base, f"template '{name}' needs 'instances' (a list of names), 'count' or 'instances_from'", at_key=True)
         return []
+
+    def _instances_from(self, name: str, template: dict[str, Any], base: tuple[Any, ...]) -> list[str]:
+        """Instance names from the `id` of each item of a YAML list in another file, plus initial values."""
+        spec = template["instances_from"]
+        where = (*base, "instances_from")
+        if isinstance(spec, str):
+            spec = {"file": spec}
+        elif isinstance(spec, dict) and isinstance(spec.get("file"), str):
+            where = (*where, "file")
+        else:
+            return []  # the schema reported it
+        file = self.path.parent / spec["file"]
+        if not file.is_file():
+            self.problem(where, f"instances_from: file not found: {file}")
+            return []
+        try:
+            data, source = load_yaml(file)
+        except ConfigError as error:
+            self.problems.extend(error.problems)
+            return []
+        items, prefix = self._external_list(data, source, spec.get("key"), where, file)
+        if items is None:
+            return []
+        result: list[str] = []
+        for index, item in enumerate(items):
+            item_id = item.get("id") if isinstance(item, dict) else None
+            if not isinstance(item_id, str) or not _is_name(item_id):
+                what = f"its id {item_id!r} is not a valid name ({NAME_RULE})" if item_id is not None else "it has no 'id'"
+                self.problems.append(source.problem((*prefix, index), f"item {index + 1} cannot be an instance of template '{name}': {what}"))
+                continue
+            if item_id in result:
+                self.problems.append(source.problem((*prefix, index, "id"), f"duplicate id '{item_id}'"))
+                continue
+            result.append(item_id)
+        initial = spec.get("initial") if isinstance(spec.get("initial"), dict) else {}
+        tag_specs = template.get("tags") if isinstance(template.get("tags"), dict) else {}
+        values: dict[str, dict[str, tuple[Any, Location]]] = {item_id: {} for item_id in result}
+        for tag_name, dotted in initial.items():
+            if tag_name not in tag_specs:
+                self.problem((*base, "instances_from", "initial", tag_name), f"template '{name}' has no tag '{tag_name}'{did_you_mean(tag_name, tag_specs)}", at_key=True)
+                continue
+            if not isinstance(dotted, str):
+                continue
+            keys = dotted.split(".")
+            found = 0
+            for index, item in enumerate(items):
+                value = item
+                for key in keys:
+                    value = value.get(key) if isinstance(value, dict) else None
+                if isinstance(item, dict) and item.get("id") in values and value is not None:
+                    values[item["id"]][tag_name] = (value, source.value((*prefix, index, *keys)))
+                    found += 1
+            if not found:  # a key missing from every item is a typo, not an optional value
+                self.problem((*base, "instances_from", "initial", tag_name), f"no item of {file} has '{dotted}'")
+        self.external_initial[name] = values
+        return result
+
+    def _external_list(self, data: Any, source: SourceMap, key: Any, where: tuple[Any, ...], file: Path) -> tuple[list[Any] | None, tuple[Any, ...]]:
+        """The list of items in an instances_from file: the file itself, or its (only) list entry."""
+        if isinstance(key, str):
+            if isinstance(data, dict) and isinstance(data.get(key), list):
+                return data[key], (key,)
+            self.problem(where, f"instances_from: {file} has no list under '{key}'")
+            return None, ()
+        if isinstance(data, list):
+            return data, ()
+        lists = [k for k, v in data.items() if isinstance(v, list)] if isinstance(data, dict) else []
+        if len(lists) == 1:
+            return data[lists[0]], (lists[0],)
+        found = f"several lists ({', '.join(lists)}): name one with 'key'" if lists else "no list of items with 'id'"
+        self.problem(where, f"instances_from: {file} has {found}")
+        return None, ()
+
+    def _problem_at(self, where: tuple[Any, ...] | Location, message: str) -> None:
+        """A problem at a path of this file, or at a location in another file (instances_from)."""
+        if isinstance(where, Location):
+            self.problems.append(Problem(where, message))
+        else:
+            self.problem(where, message)
 
     def _check_plain_tags(self, tags: Any) -> None:
         if not isinstance(tags, dict):
@@ -309,7 +401,7 @@ class _Checker:
         path: tuple[Any, ...],
         *,
         default_group: str,
-        initial_override: tuple[Any, tuple[Any, ...]] | None = None,
+        initial_override: tuple[Any, tuple[Any, ...] | Location] | None = None,
     ) -> None:
         if not isinstance(spec, dict) or not isinstance(name, str):
             return
@@ -349,15 +441,15 @@ class _Checker:
         try:
             initial = data_type.coerce(initial)
         except TypeMismatch as error:
-            self.problem(initial_path, f"initial value of '{name}' is invalid: {error}")
+            self._problem_at(initial_path, f"initial value of '{name}' is invalid: {error}")
             ok = False
         else:
             if data_type.is_numeric and ok:
                 if isinstance(low, (int, float)) and initial < low:
-                    self.problem(initial_path, f"initial value {initial} of '{name}' is below its min {low}{hint}")
+                    self._problem_at(initial_path, f"initial value {initial} of '{name}' is below its min {low}{hint}")
                     ok = False
                 if isinstance(high, (int, float)) and initial > high:
-                    self.problem(initial_path, f"initial value {initial} of '{name}' is above its max {high}{hint}")
+                    self._problem_at(initial_path, f"initial value {initial} of '{name}' is above its max {high}{hint}")
                     ok = False
         if not ok:
             return
@@ -535,6 +627,10 @@ class _Checker:
     def _check_runtime(self, runtime: Any) -> None:
         if isinstance(runtime, dict) and "stall_after" in runtime:
             self._duration(runtime["stall_after"], ("runtime", "stall_after"), "stall_after")
+
+
+def _is_name(text: str) -> bool:
+    return re.match(NAME_PATTERN, text) is not None
 
 
 def _substitute(text: str, substitution: dict[str, str]) -> str:

@@ -1,0 +1,326 @@
+"""The fleet adapter: drives the plant's robots from `softplc run` (see `softplc.fleet`).
+
+Simulated robots (`driver: sim`) each get a control loop in the runtime; remote robots
+(`driver: remote`) run the same driver in a `softplc robot-agent` process, and this adapter
+publishes their reports to their tags and marks those tags BAD while the agent is away.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from softplc.config import PlantConfig
+from softplc.fleet.controller import SpeedLimits
+from softplc.fleet.driver import Command, DriverSettings, Report, RobotDriver
+from softplc.fleet.floor import Floor
+from softplc.fleet.gridmap import OccupancyGrid, load_map
+from softplc.fleet.loop import ControlLoop, LoopStats, Sample
+from softplc.fleet.peers import PEER_TAGS, PeerView
+from softplc.fleet.protocol import Registration, decode_report
+from softplc.fleet.robots import DriverKind, Pose, RobotFile, RobotSpec, load_robots
+from softplc.fleet.settings import FleetSettings
+from softplc.tagdb import TagDatabase
+from softplc.tags import Quality, Tag
+
+if TYPE_CHECKING:
+    from softplc.runtime import Runtime
+
+log = logging.getLogger(__name__)
+
+# Tags every robot needs (NAME → rNN_NAME); remote robots need REMOTE_TAGS too.
+COMMAND_TAGS = ("xgoal", "ygoal", "status")
+PUBLISHED_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "navreason")
+REMOTE_TAGS = ("report", "agent", "online")
+REQUIRED_TAGS = tuple(dict.fromkeys((*COMMAND_TAGS, *PUBLISHED_TAGS, *PEER_TAGS)))
+PHASES = 10  # robots' cycles are spread over this many slots of the cycle (smoother load)
+
+
+class SharedPeers:
+    """One PeerView per instant, shared by every in-process robot (read from the tags)."""
+
+    def __init__(self, db: TagDatabase, ids: Sequence[str], now: Any) -> None:
+        self._db = db
+        self._ids = list(ids)
+        self._now = now
+        self._at = -1.0
+        self._view: PeerView | None = None
+
+    def get(self) -> PeerView:
+        now = self._now()
+        if self._view is None or now != self._at:
+            self._view = PeerView.from_tags(self._ids, self._db.value)
+            self._at = now
+        return self._view
+
+
+class TagIO:
+    """A simulated robot's inputs and outputs: its tags in the runtime's database."""
+
+    def __init__(self, db: TagDatabase, robot_id: str, peers: SharedPeers) -> None:
+        self.db = db
+        self.id = robot_id
+        self._peers = peers
+        self._goal_x, self._goal_y, self._status = (self.db[f"{robot_id}_{name}"] for name in COMMAND_TAGS)
+        self._names = {name: f"{robot_id}_{name}" for name in (*PUBLISHED_TAGS, "status")}
+        self._last: dict[str, Any] = {}
+        self.source = f"fleet:{robot_id}"
+
+    def command(self) -> Command:
+        return Command(self._goal_x.value, self._goal_y.value, bool(self._status.value))
+
+    def peers(self) -> PeerView:
+        return self._peers.get()
+
+    async def publish(self, report: Report) -> None:
+        names = self._names
+        values = {
+            "xpos": report.x, "ypos": report.y, "heading": report.heading, "speed": report.speed,
+            "navstate": report.navstate.value, "navreason": report.reason,
+        }
+        # Only what changed: a parked robot costs nothing, a moving one ~5 writes a cycle.
+        items = [(names[key], value) for key, value in values.items() if self._last.get(key) != value]
+        self._last.update(values)
+        if report.status is not None:
+            items.append((names["status"], report.status))
+        if items:
+            for rejected in self.db.submit(items, self.source, client=False):
+                if rejected is not None:
+                    log.warning("robot %s: %s", self.id, rejected)
+
+
+class RemoteLink:
+    """The runtime's side of a remote robot: reports in, heartbeat watch, quality BAD when away."""
+
+    def __init__(self, db: TagDatabase, spec: RobotSpec, now: Any, timeout: float) -> None:
+        self.db = db
+        self.spec = spec
+        self.id = spec.id
+        self._now = now
+        self.timeout = timeout
+        self.online = False
+        self.last_seen = -1.0
+        self.registration: Registration | None = None
+        self.reports = 0
+        self.rejected = 0
+        self._status_seq: int | None = None
+        self._published = [f"{spec.id}_{name}" for name in PUBLISHED_TAGS]
+        self.source = f"fleet:{spec.id}:remote"
+
+    def go_offline(self, why: str) -> None:
+        if self.online:
+            log.warning("remote robot %s is away (%s): its tags are BAD until it reports again", self.id, why)
+        self.online = False
+        self.db.submit_quality(self._published, Quality.BAD, self.source)
+        self.db.submit([(f"{self.id}_online", False)], self.source, client=False)
+
+    def on_agent(self, text: str) -> None:
+        if not text:
+            return
+        try:
+            registration = Registration.decode(text)
+        except ValueError as error:
+            log.warning("robot %s: ignoring a bad registration: %s", self.id, error)
+            return
+        if registration.id != self.id:
+            log.warning("robot %s: an agent registered as %r in its tag; ignored", self.id, registration.id)
+            return
+        self.registration = registration
+        self._status_seq = None  # a new agent session numbers its status events afresh
+        expected = sorted(item.value for item in self.spec.hardware)
+        if registration.hardware and sorted(registration.hardware) != expected:
+            log.warning("robot %s registered with hardware %s, robots.yaml says %s", self.id, registration.hardware, expected)
+        log.info("robot %s (%s) registered from %s (pid %s, %s)", self.id, registration.name, registration.host or "?", registration.pid, registration.software)
+
+    def on_report(self, text: str) -> None:
+        if not text:
+            return
+        try:
+            report = decode_report(text)
+        except ValueError as error:
+            self.rejected += 1
+            log.warning("robot %s: ignoring a bad report: %s", self.id, error)
+            return
+        self.reports += 1
+        self.last_seen = self._now()
+        items: list[tuple[str, Any]] = [
+            (f"{self.id}_xpos", report.x), (f"{self.id}_ypos", report.y), (f"{self.id}_heading", report.heading),
+            (f"{self.id}_speed", report.speed), (f"{self.id}_navstate", report.navstate), (f"{self.id}_navreason", report.reason),
+        ]
+        if not self.online:
+            self.online = True
+            items.append((f"{self.id}_online", True))
+            log.info("remote robot %s is online", self.id)
+        if report.status is not None and report.status_seq != self._status_seq:
+            self._status_seq = report.status_seq
+            items.append((f"{self.id}_status", report.status))
+        for rejected in self.db.submit(items, self.source, client=False):
+            if rejected is not None:
+                log.warning("robot %s: %s", self.id, rejected)
+
+    def check(self) -> None:
+        if self.online and self._now() - self.last_seen > self.timeout:
+            self.go_offline(f"no report for {self.timeout:g} s")
+
+
+class FleetAdapter:
+    """Drives every robot of a robots file on a map; see the `softplc.fleet` docstring."""
+
+    name = "fleet"
+
+    def __init__(
+        self,
+        robots: RobotFile,
+        grid: OccupancyGrid | Floor,
+        *,
+        cycle: float = 0.1,
+        max_linear_speed: float = 0.2,
+        max_angular_speed: float = 0.4,
+        planning_resolution: float = 0.1,
+        goal_tolerance: float = 0.5,
+        heartbeat_timeout: float = 3.0,
+        record: bool = False,
+        settings: DriverSettings | None = None,
+    ) -> None:
+        self.robots = robots
+        self.floor = grid if isinstance(grid, Floor) else Floor(grid, planning_resolution=planning_resolution)
+        self.cycle = cycle
+        self.max_linear_speed = max_linear_speed
+        self.max_angular_speed = max_angular_speed
+        self.heartbeat_timeout = heartbeat_timeout
+        self.driver_settings = settings or DriverSettings(goal_tolerance=goal_tolerance)
+        self.record = record
+        self.drivers: dict[str, RobotDriver] = {}
+        self.loops: dict[str, ControlLoop] = {}
+        self.remotes: dict[str, RemoteLink] = {}
+        self.trajectories: dict[str, list[Sample]] = {}
+        self._runtime: Runtime | None = None
+        self._tasks: list[asyncio.Task[Any]] = []
+        self._unsubscribe: Any = None
+        self._watch: dict[str, tuple[RemoteLink, str]] = {}
+
+    @classmethod
+    def from_config(cls, config: PlantConfig, *, record: bool = False, **overrides: Any) -> FleetAdapter:
+        """The adapter for a plant's `fleet:` section (raises ConfigError for bad files)."""
+        settings = FleetSettings.from_config(config)
+        return cls.from_files(
+            settings.robots, settings.map, cycle=settings.cycle, max_linear_speed=settings.max_linear_speed,
+            max_angular_speed=settings.max_angular_speed, planning_resolution=settings.planning_resolution,
+            goal_tolerance=settings.goal_tolerance, heartbeat_timeout=settings.heartbeat_timeout, record=record,
+            **overrides,
+        )
+
+    @classmethod
+    def from_files(cls, robots: str | Path, map_yaml: str | Path, **options: Any) -> FleetAdapter:
+        """The adapter for a robots file and a map YAML."""
+        return cls(load_robots(robots), load_map(map_yaml), **options)
+
+    # -- adapter protocol ----------------------------------------------------------------
+
+    async def start(self, runtime: Runtime) -> None:
+        from softplc.runtime import AdapterError
+
+        self._runtime = runtime
+        db = runtime.db
+        missing = [f"{robot.id}_{name}" for robot in self.robots for name in self._needed(robot) if f"{robot.id}_{name}" not in db]
+        if missing:
+            shown = ", ".join(missing[:8]) + (f" and {len(missing) - 8} more" if len(missing) > 8 else "")
+            raise AdapterError(f"fleet: the robots of {self.robots.path} need tags that tagdb.yaml does not declare: {shown} "
+                               "(add them to the robot template; see docs/robots.md)")
+        for robot in self.robots:
+            if not self.floor.fits(robot.start.x, robot.start.y, robot.radius):
+                raise AdapterError(f"fleet: {self.robots.location(robot.id, 'start')}: robot {robot.id} starts at "
+                                   f"({robot.start.x:g}, {robot.start.y:g}), which is not free floor for its size on the map")
+        ids = self.robots.ids
+        db.submit([(f"{robot.id}_radius", robot.radius) for robot in self.robots], "fleet", client=False)
+        peers = SharedPeers(db, ids, runtime.clock.now)
+        limits = {robot.id: self.limits(robot) for robot in self.robots}
+        sim = [robot for robot in self.robots if robot.driver is DriverKind.SIM]
+        for index, robot in enumerate(sim):
+            pose = Pose(float(db.value(f"{robot.id}_xpos")), float(db.value(f"{robot.id}_ypos")), float(db.value(f"{robot.id}_heading")))
+            driver = RobotDriver(robot, self.floor, limits[robot.id], self.driver_settings, cycle=self.cycle, pose=pose)
+            record = self.trajectories.setdefault(robot.id, []) if self.record else None
+            loop = ControlLoop(driver, TagIO(db, robot.id, peers), runtime.clock, self.cycle,
+                               phase=(index % PHASES) * self.cycle / PHASES, record=record)
+            self.drivers[robot.id] = driver
+            self.loops[robot.id] = loop
+            self._tasks.append(runtime.spawn(loop.run(), f"robot-{robot.id}"))
+        for robot in self.robots:
+            if robot.driver is DriverKind.REMOTE:
+                link = RemoteLink(db, robot, runtime.clock.now, self.heartbeat_timeout)
+                link.go_offline("not connected yet")
+                self.remotes[robot.id] = link
+                self._watch[f"{robot.id}_report"] = (link, "report")
+                self._watch[f"{robot.id}_agent"] = (link, "agent")
+        if self.remotes:
+            self._unsubscribe = db.on_change(self._on_change)
+            self._tasks.append(runtime.spawn(self._heartbeats(), "fleet-heartbeats"))
+
+    async def stop(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            try:
+                await task
+            except (asyncio.CancelledError, Exception):
+                pass
+        self._tasks.clear()
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+
+    def describe(self) -> str:
+        remote = len([r for r in self.robots if r.driver is DriverKind.REMOTE])
+        width, height = self.floor.grid.size_m
+        return (f"fleet: {len(self.robots)} robots ({len(self.robots) - remote} simulated, {remote} remote) "
+                f"on map '{self.floor.grid.name}' {width:.2f} x {height:.2f} m, cycle {self.cycle * 1000:g} ms")
+
+    # -- for programs, scenarios and tests -----------------------------------------------
+
+    def limits(self, robot: RobotSpec) -> SpeedLimits:
+        """The robot's own limits, capped by the floor's."""
+        return SpeedLimits(min(robot.max_linear_speed, self.max_linear_speed), min(robot.max_angular_speed, self.max_angular_speed))
+
+    def pose(self, robot_id: str) -> Pose:
+        """Where a robot is now (a remote robot: as last reported)."""
+        if robot_id in self.drivers:
+            return self.drivers[robot_id].pose
+        assert self._runtime is not None
+        value = self._runtime.db.value
+        return Pose(float(value(f"{robot_id}_xpos")), float(value(f"{robot_id}_ypos")), float(value(f"{robot_id}_heading")))
+
+    def trajectory(self, robot_id: str) -> list[Sample]:
+        """Every cycle of a simulated robot (only with `record=True`)."""
+        return self.trajectories.get(robot_id, [])
+
+    def stats(self) -> dict[str, LoopStats]:
+        return {robot_id: loop.stats for robot_id, loop in self.loops.items()}
+
+    # -- remote robots -------------------------------------------------------------------
+
+    def _needed(self, robot: RobotSpec) -> tuple[str, ...]:
+        return (*REQUIRED_TAGS, *REMOTE_TAGS) if robot.driver is DriverKind.REMOTE else REQUIRED_TAGS
+
+    def _on_change(self, tags: Sequence[Tag]) -> None:
+        watch = self._watch
+        for tag in tags:
+            entry = watch.get(tag.name)
+            if entry is None:
+                continue
+            link, kind = entry
+            if kind == "report":
+                link.on_report(str(tag.value))
+            else:
+                link.on_agent(str(tag.value))
+
+    async def _heartbeats(self) -> None:
+        assert self._runtime is not None
+        clock = self._runtime.clock
+        period = min(0.5, self.heartbeat_timeout / 4)
+        while True:
+            await clock.sleep(period)
+            for link in self.remotes.values():
+                link.check()

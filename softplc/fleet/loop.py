@@ -1,0 +1,129 @@
+"""The control loop: one async task per robot runs its driver every cycle on the runtime clock.
+
+Cycles are released on absolute deadlines (`start + k * cycle`); a cycle that ends after its
+next release skips the missed ones and counts them as overruns, like a PLC task. Planning runs
+through `clock.run_blocking` (an executor thread in real time, inline on the simulated clock)
+while the loop keeps cycling, so a 40 ms A* never stalls the robot or the event loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from softplc.clock import Clock
+from softplc.fleet.driver import Command, PlanRequest, Report, RobotDriver, run_plan
+from softplc.fleet.peers import PeerView
+from softplc.fleet.planner import Plan
+
+log = logging.getLogger(__name__)
+
+
+class DriverIO(Protocol):
+    """Where a driver's inputs come from and its outputs go (tag database or OPC UA)."""
+
+    def command(self) -> Command | None:
+        """The goal tags now; None while they are unknown (then the robot holds still)."""
+        ...
+
+    def peers(self) -> PeerView: ...
+
+    async def publish(self, report: Report) -> None: ...
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One cycle of a robot's recorded trajectory."""
+
+    t: float
+    x: float
+    y: float
+    heading: float
+    speed: float
+    turn_rate: float
+    navstate: str
+
+
+@dataclass
+class LoopStats:
+    """Timing of one robot's control loop (real seconds for step times)."""
+
+    cycles: int = 0
+    overruns: int = 0
+    step_total: float = 0.0
+    step_max: float = 0.0
+    plan_total: float = 0.0
+    plan_max: float = 0.0
+    plans: int = 0
+
+    @property
+    def step_mean(self) -> float:
+        return self.step_total / self.cycles if self.cycles else 0.0
+
+
+@dataclass
+class ControlLoop:
+    """Runs one driver forever: read inputs, step, publish, record."""
+
+    driver: RobotDriver
+    io: DriverIO
+    clock: Clock
+    cycle: float = 0.1
+    phase: float = 0.0
+    record: list[Sample] | None = None
+    stats: LoopStats = field(default_factory=LoopStats)
+
+    async def run(self) -> None:
+        clock = self.clock
+        origin = clock.now() + self.phase
+        k = 0
+        planning: asyncio.Task[Plan] | None = None
+        planning_serial = 0
+        while True:
+            release = origin + k * self.cycle
+            await clock.sleep_until(release)
+            began = time.perf_counter()
+            now = clock.now()
+            if planning is not None and planning.done():
+                plan = planning.result() if not planning.cancelled() and planning.exception() is None else None
+                if plan is None:
+                    error = None if planning.cancelled() else planning.exception()
+                    plan = Plan(False, reason=f"planner error: {error!r}")
+                self._count_plan(plan.seconds)
+                self.driver.plan_done(planning_serial, plan, now)
+                planning = None
+            command = self.io.command()
+            if command is not None:
+                report = self.driver.step(now, command, self.io.peers())
+                request = self.driver.take_plan_request()
+                if request is not None:
+                    if planning is not None:
+                        planning.cancel()  # superseded: its result would be ignored anyway
+                    planning, planning_serial = self._plan(request), request.serial
+                await self.io.publish(report)
+                if self.record is not None:
+                    pose = self.driver.pose
+                    self.record.append(Sample(now, pose.x, pose.y, pose.heading, report.speed, report.turn_rate, report.navstate.value))
+            stats = self.stats
+            stats.cycles += 1
+            spent = time.perf_counter() - began
+            stats.step_total += spent
+            stats.step_max = max(stats.step_max, spent)
+            k += 1
+            late = clock.now() - (origin + k * self.cycle)
+            if late > 0:
+                missed = math.floor(late / self.cycle) + 1
+                stats.overruns += missed
+                k += missed
+
+    def _plan(self, request: PlanRequest) -> asyncio.Task[Plan]:
+        return asyncio.ensure_future(self.clock.run_blocking(run_plan, request))
+
+    def _count_plan(self, seconds: float) -> None:
+        self.stats.plans += 1
+        self.stats.plan_total += seconds
+        self.stats.plan_max = max(self.stats.plan_max, seconds)

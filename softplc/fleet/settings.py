@@ -1,0 +1,73 @@
+"""The `fleet:` section of tagdb.yaml: which robots, tasks and map, and how fast they are driven."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from softplc.config import PlantConfig
+from softplc.durations import parse_duration
+from softplc.yamlsource import ConfigError
+
+DEFAULT_ROBOTS = "robots/robots.yaml"
+DEFAULT_TASKS = "robots/tasks.yaml"
+DEFAULT_MAP = "robots/maps/factory.yaml"
+
+
+@dataclass(frozen=True)
+class FleetSettings:
+    """Resolved fleet settings (paths absolute, durations in seconds)."""
+
+    robots: Path
+    tasks: Path
+    map: Path
+    enabled: bool = True
+    template: str = "robot"
+    cycle: float = 0.1
+    max_linear_speed: float = 0.2  # floor speed limit (thesis §3.7)
+    max_angular_speed: float = 0.4
+    planning_resolution: float = 0.1
+    goal_tolerance: float = 0.5
+    heartbeat_timeout: float = 3.0
+
+    @classmethod
+    def from_config(cls, config: PlantConfig) -> FleetSettings:
+        """Settings from `config.raw['fleet']` (defaults when the section is missing)."""
+        section: dict[str, Any] = config.raw.get("fleet") or {}
+        base = config.base_dir
+        source = config.source
+
+        def duration(key: str, default: float) -> float:
+            if key not in section:
+                return default
+            try:
+                seconds = parse_duration(section[key])
+            except (TypeError, ValueError) as error:
+                seconds = -1.0
+                message = str(error)
+            else:
+                message = "must be greater than zero"
+            if seconds <= 0:
+                where = source.problem(("fleet", key), f"bad {key} {section[key]!r}: {message}") if source else None
+                raise ConfigError([where] if where else [])
+            return seconds
+
+        return cls(
+            robots=base / section.get("robots", DEFAULT_ROBOTS),
+            tasks=base / section.get("tasks", DEFAULT_TASKS),
+            map=base / section.get("map", DEFAULT_MAP),
+            enabled=bool(section.get("enabled", True)),
+            template=section.get("template", "robot"),
+            cycle=duration("cycle", 0.1),
+            max_linear_speed=float(section.get("max_linear_speed", 0.2)),
+            max_angular_speed=float(section.get("max_angular_speed", 0.4)),
+            planning_resolution=float(section.get("planning_resolution", 0.1)),
+            goal_tolerance=float(section.get("goal_tolerance", 0.5)),
+            heartbeat_timeout=duration("heartbeat_timeout", 3.0),
+        )
+
+    @classmethod
+    def configured(cls, config: PlantConfig) -> bool:
+        """True when the plant has a `fleet:` section (the adapter is started only then)."""
+        return isinstance(config.raw.get("fleet"), dict)
