@@ -7,6 +7,7 @@ builds itself from the configuration (`build_adapters`). The core never imports 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from softplc.config import PlantConfig
 from softplc.runtime import Adapter
@@ -20,6 +21,12 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--modbus-host", metavar="HOST", help="Modbus TCP bind address (default servers.modbus.host, 127.0.0.1)")
     group.add_argument("--modbus-port", type=int, metavar="PORT", help="Modbus TCP port (default servers.modbus.port, 5020; 0 = any free port)")
     group.add_argument("--no-modbus", action="store_true", help="do not start the Modbus TCP server")
+    # OPC UA (softplc.opcua)
+    group.add_argument("--opcua-endpoint", metavar="URL", help="OPC UA endpoint, e.g. opc.tcp://0.0.0.0:4840/softplc/ (default servers.opcua.endpoint; port 0 = any free port)")
+    group.add_argument("--opcua-security", metavar="LIST", help="comma-separated policies: None, Basic256Sha256_Sign, Basic256Sha256_SignAndEncrypt")
+    group.add_argument("--opcua-anonymous", choices=("off", "viewer"), help="anonymous OPC UA sessions: refused, or read-only")
+    group.add_argument("--opcua-users", type=Path, metavar="FILE", help="OPC UA users file (default servers.opcua.users_file, STATE_DIR/users.yaml)")
+    group.add_argument("--no-opcua", action="store_true", help="do not start the OPC UA server")
 
 
 def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) -> list[Adapter]:
@@ -27,6 +34,7 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
     adapters: list[Adapter] = []
     if args is not None and getattr(args, "no_servers", False):
         return adapters
+    adapters.extend(_opcua(config, args))
     adapters.extend(_modbus(config, args))
     return adapters
 
@@ -44,3 +52,30 @@ def _modbus(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapte
     from softplc.modbus.server import ModbusAdapter
 
     return [ModbusAdapter(config, settings)]
+
+
+def _opcua(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    from softplc.opcua.settings import OpcUaSettings, SettingsError
+    from softplc.yamlsource import ConfigError, Location, Problem
+
+    try:
+        settings = OpcUaSettings.from_section(config.servers.get("opcua"), config.base_dir)
+    except SettingsError as error:
+        path = ("servers", "opcua", error.key)
+        where = config.source.problem(path, str(error)) if config.source else Problem(Location(str(config.path), 1, 1), str(error))
+        raise ConfigError([where]) from None
+    security = getattr(args, "opcua_security", None)
+    try:
+        settings = settings.with_overrides(
+            endpoint=getattr(args, "opcua_endpoint", None),
+            security=tuple(p.strip() for p in security.split(",") if p.strip()) if security else None,
+            anonymous=getattr(args, "opcua_anonymous", None),
+            users_file=getattr(args, "opcua_users", None),
+        )
+    except SettingsError as error:
+        raise SystemExit(f"softplc: --opcua-{error.key.replace('_file', 's')}: {error}") from None
+    if not settings.enabled or bool(getattr(args, "no_opcua", False)):
+        return []
+    from softplc.opcua.server import OpcUaServer
+
+    return [OpcUaServer(settings)]

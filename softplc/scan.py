@@ -12,6 +12,7 @@ release skips the missed releases and counts them as overruns; it never bursts t
 
 from __future__ import annotations
 
+import asyncio
 import enum
 import logging
 import math
@@ -285,12 +286,18 @@ class ScanEngine:
                 await clock.sleep(0.01)
             return
         while not self._stopping:
-            task = min(self.tasks, key=lambda t: (t.next_release, t.priority))
-            release = task.next_release
-            await clock.sleep_until(release)
-            if self._stopping:
-                break
-            self.cycle(task, release)
+            now = clock.now()
+            due = [task for task in self.tasks if task.next_release <= now]
+            if not due:
+                await clock.sleep_until(min(task.next_release for task in self.tasks))
+                continue
+            # Of the tasks due (several after a long scan), the highest priority goes first,
+            # even if a lower-priority task has waited longer.
+            task = min(due, key=lambda t: (t.priority, t.next_release))
+            self.cycle(task, task.next_release)
+            # Let adapters run between cycles even when the next task is already due (an
+            # overloaded engine must not starve the protocol servers).
+            await asyncio.sleep(0)
 
     def cycle(self, task: Task, release: float) -> None:
         clock = self.clock

@@ -123,16 +123,22 @@ TASK: dict[str, Any] = {
 OPCUA_SERVER: dict[str, Any] = {
     "type": "object",
     "properties": {
-        "enabled": {"type": "boolean"},
-        "endpoint": {"type": "string", "description": "opc.tcp://HOST:PORT/PATH (default opc.tcp://127.0.0.1:4840/softplc/)."},
-        "namespace": {"type": "string", "description": "Namespace URI of the tags."},
+        "enabled": {"type": "boolean", "description": "false: no OPC UA server (default true)."},
+        "endpoint": {"type": "string", "description": "opc.tcp://HOST:PORT/PATH (default opc.tcp://127.0.0.1:4840/softplc/; port 0 = any free port)."},
+        "namespace": {"type": "string", "description": "Namespace URI of the tags (default urn:softplc:tags)."},
+        "application_uri": {"type": "string", "description": "ApplicationUri of the server, also in its certificate (default urn:softplc:server)."},
         "security": {
             "type": "array",
+            "minItems": 1,
             "items": {"enum": ["None", "Basic256Sha256_Sign", "Basic256Sha256_SignAndEncrypt"]},
-            "description": "Security policies offered.",
+            "description": "Security policies offered (default: all three on a loopback endpoint, the two Basic256Sha256 modes elsewhere).",
         },
-        "anonymous": {"enum": ["off", "viewer"], "description": "Anonymous sessions: refused, or read-only."},
-        "users_file": {"type": "string", "description": "Users and password hashes (softplc users ...)."},
+        "anonymous": {"enum": ["off", "viewer"], "description": "Anonymous sessions: refused, or read-only (default viewer on loopback, off elsewhere)."},
+        "users_file": {"type": "string", "description": "Users, roles and password hashes, relative to this file (default STATE_DIR/users.yaml; softplc users ...)."},
+        "pki_dir": {"type": "string", "description": "Server certificate and trusted/rejected client certificates (default STATE_DIR/pki)."},
+        "certificate": {"type": "string", "description": "Use this server certificate (DER or PEM) instead of generating one; needs private_key."},
+        "private_key": {"type": "string", "description": "Private key (PEM) of `certificate`."},
+        "folder_size": {"type": "integer", "minimum": 10, "maximum": 10000, "description": "Most children per folder before it is split (default 100)."},
     },
     "additionalProperties": False,
 }

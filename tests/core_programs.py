@@ -1,0 +1,147 @@
+"""Programs used by the scan and runtime tests (loaded by file path from test YAML)."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from softplc import InOut, Input, Output, Param, Program
+
+
+class PairChecker(Program):
+    """Asserts that a client's pair of writes (a, b with b == -a) is never seen half-applied."""
+
+    a = Input("first half")
+    b = Input("second half, always -a")
+    checks = InOut("scans that checked the pair")
+
+    def setup(self) -> None:
+        self.seen: list[tuple[float, float, float]] = []
+
+    def scan(self) -> None:
+        if self.a != -self.b:
+            raise AssertionError(f"half-applied write: a={self.a} b={self.b}")
+        self.seen.append((self.now, self.a, self.b))
+        self.checks += 1
+
+
+class Counter(Program):
+    """Counts its scans into an InOut tag and remembers when it ran."""
+
+    count = InOut("scan counter")
+
+    def setup(self) -> None:
+        self.times: list[float] = []
+
+    def scan(self) -> None:
+        self.times.append(self.now)
+        self.count += 1
+
+
+class Watcher(Program):
+    """Records the value of one input at every scan: (time, value)."""
+
+    value = Input("the watched tag")
+
+    def setup(self) -> None:
+        self.seen: list[tuple[float, Any]] = []
+
+    def scan(self) -> None:
+        self.seen.append((self.now, self.value))
+
+
+class Overrider(Program):
+    """Records what it sees in `value`, then forces it to `forced` while `force` is on."""
+
+    value = InOut("the contested tag")
+    force = Input("override on/off")
+    forced = Param(100, "the value forced")
+
+    def setup(self) -> None:
+        self.seen: list[Any] = []
+
+    def scan(self) -> None:
+        self.seen.append(self.value)
+        if self.force:
+            self.value = self.forced
+
+
+class Bomb(Program):
+    """Raises while `armed` is true; counts setups and scans."""
+
+    armed = Input("raise while true")
+    scans = InOut("scans completed")
+
+    setups = 0
+
+    def setup(self) -> None:
+        type(self).setups += 1
+        self.setup_times = getattr(self, "setup_times", []) + [self.now]
+
+    def scan(self) -> None:
+        if self.armed:
+            raise ZeroDivisionError("armed and dangerous")
+        self.scans += 1
+
+
+class BadSetup(Program):
+    """A program whose setup() raises."""
+
+    out = Output("never written")
+
+    def setup(self) -> None:
+        raise RuntimeError("cannot initialise the widget")
+
+    def scan(self) -> None:
+        self.out = 1
+
+
+class Exiter(Program):
+    """Calls sys.exit() in its scan: must fault, not end the runtime."""
+
+    out = Output("never written")
+
+    def scan(self) -> None:
+        raise SystemExit(3)
+
+
+class BadWriter(Program):
+    """Writes a valid value to `good` and, when `mode` says so, an invalid one to `bad`."""
+
+    mode = Input("0 ok, 1 out of range, 2 wrong type, 3 list of wrong length")
+    good = Output("a valid output")
+    bad = Output("the output that gets the invalid value")
+    many = Output("a list-bound output", optional=True)
+
+    def scan(self) -> None:
+        self.good += 1
+        if self.mode == 1:
+            self.bad = 200
+        elif self.mode == 2:
+            self.bad = "two hundred"
+        elif self.mode == 3 and self.many is not None:
+            self.many = [1.0]
+
+
+class Blocker(Program):
+    """Blocks the event loop with time.sleep: `block` seconds on every scan while `armed`."""
+
+    armed = Input("block while true")
+    done = InOut("blocking scans finished")
+    block = Param(0.035, "seconds to block each scan")
+    once = Param(False, "block on one scan only")
+
+    def scan(self) -> None:
+        if self.armed and not (self.once and self.done):
+            time.sleep(self.block)
+            self.done += 1
+
+
+class Follower(Program):
+    """Copies `source` to `target` (a one-cycle-later image of another program's output)."""
+
+    source = Input("followed tag")
+    target = Output("copy")
+
+    def scan(self) -> None:
+        self.target = self.source
