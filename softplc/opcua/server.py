@@ -1,0 +1,211 @@
+"""The OPC UA adapter: serves every tag of the runtime over OPC UA (asyncua 2.1.0).
+
+Public surface (what other adapters, tools and tests use):
+
+    server = OpcUaServer(OpcUaSettings(endpoint="opc.tcp://127.0.0.1:0/softplc/"))
+    runtime.add_adapter(server); await runtime.start()
+    server.endpoint          actual URL, with the real port when 0 was asked for
+    server.namespace_uri     "urn:softplc:tags" unless configured (`namespace:`)
+    server.namespace_index   its index in this server (clients: `await client.get_namespace_index(uri)`)
+    server.node_id("r01_xpos")  → ua.NodeId("r01_xpos", namespace_index); clients build the same
+                             NodeId themselves: `ns=<index>;s=<tag name>`
+    softplc.opcua.variant_for(tag_definition, value)  the Variant a client should write
+
+Users and certificates: `softplc.opcua.UserStore(path).add(name, Role.OPERATOR, password)`,
+`softplc.opcua.Pki(state_dir / "pki").trust(certificate_file)` (the CLI does the same).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import logging
+import time
+from datetime import datetime, timezone
+from typing import TYPE_CHECKING, Any
+from urllib.parse import urlparse
+
+from asyncua import Server, ua
+from asyncua.crypto.security_policies import SecurityPolicyNone
+
+from softplc import __version__
+from softplc.opcua.address_space import AddressSpaceBuilder, plan_folders, tag_node_id
+from softplc.opcua.publisher import Publisher
+from softplc.opcua.roles import RolePermissions
+from softplc.opcua.security import ClientCertificateValidator, Pki, SecuredChannels, TrackingPolicyFactory
+from softplc.opcua.settings import POLICIES, POLICY_NONE, POLICY_TEXT, OpcUaSettings
+from softplc.opcua.users import SoftplcUserManager, UserStore
+from softplc.opcua.writes import TagAttributeService
+from softplc.yamlsource import ConfigError
+
+if TYPE_CHECKING:
+    from softplc.runtime import Runtime
+
+log = logging.getLogger(__name__)
+
+
+class OpcUaServer:
+    """Adapter: an asyncua server whose address space mirrors the runtime's tag database."""
+
+    name = "opcua"
+
+    def __init__(self, settings: OpcUaSettings | None = None) -> None:
+        self.settings = settings or OpcUaSettings()
+        self.endpoint = self.settings.endpoint
+        self.namespace_index = 0
+        self.startup_seconds = 0.0  # from start() to listening with every tag in place
+        self.node_count = 0
+        self.server: Server | None = None
+        self.users: UserStore | None = None
+        self.pki: Pki | None = None
+        self.publisher: Publisher | None = None
+        self.writes: TagAttributeService | None = None
+
+    @property
+    def namespace_uri(self) -> str:
+        return self.settings.namespace
+
+    def node_id(self, tag: str) -> ua.NodeId:
+        """The NodeId of a tag's Variable."""
+        return tag_node_id(tag, self.namespace_index)
+
+    # -- lifecycle ------------------------------------------------------------------------
+
+    async def start(self, runtime: Runtime) -> None:
+        from softplc.runtime import AdapterError
+
+        started = time.perf_counter()
+        settings = self.settings
+        try:
+            self.users = UserStore(settings.users_path(runtime.state_dir))
+        except ConfigError as error:
+            raise AdapterError(f"OPC UA users file is invalid:\n{error}") from None
+        self.pki = Pki(settings.pki_path(runtime.state_dir))
+        server = Server(user_manager=SoftplcUserManager(self.users, settings.anonymous_role))
+        self.server = server
+        server.name = f"softplc {runtime.config.name}"
+        server.product_uri = "urn:softplc"
+        server.manufacturer_name = "softplc"
+        server.application_type = ua.ApplicationType.Server
+        server.set_endpoint(settings.endpoint)
+        # The 1 s CurrentTime task would make stop() wait up to a second; a value callback
+        # gives clients the current time on every read instead.
+        server.disable_clock(True)
+        iserver = server.iserver
+        iserver.allow_remote_admin = False
+        iserver.max_pending_activation_seconds = 10.0
+        await server.init()
+        await server.set_application_uri(settings.application_uri)
+        await server.set_build_info("urn:softplc", "softplc", "softplc", __version__, __version__, datetime.now(timezone.utc))
+        iserver.set_attribute_value_callback(
+            ua.NodeId(ua.ObjectIds.Server_ServerStatus_CurrentTime), ua.AttributeIds.Value, _current_time
+        )
+        self.namespace_index = await server.register_namespace(settings.namespace)
+        await self._configure_security(server)
+        await self._build_address_space(runtime)
+        try:
+            await server.start()
+        except OSError as error:
+            await _quiet_stop(server)
+            self.server = None
+            raise AdapterError(f"OPC UA cannot listen on {settings.host}:{settings.port}: {error.strerror or error}") from None
+        self._after_listen(server)
+        assert self.publisher is not None
+        self.publisher.run()
+        self.startup_seconds = time.perf_counter() - started
+        log.info("OPC UA serving %d tags (%d nodes) on %s, ready in %.2f s", len(runtime.db), self.node_count, self.endpoint, self.startup_seconds)
+
+    async def stop(self) -> None:
+        if self.publisher is not None:
+            await self.publisher.stop()
+        if self.server is not None:
+            await _quiet_stop(self.server)
+            self.server = None
+
+    def describe(self) -> str:
+        settings = self.settings
+        policies = ", ".join(POLICY_TEXT[p] for p in settings.policies)
+        anonymous = "anonymous read-only" if settings.anonymous_role is not None else "no anonymous access"
+        users = len(self.users.entries()) if self.users is not None else 0
+        where = self.users.path if self.users is not None else "users file"
+        return f"OPC UA on {self.endpoint} (ns={self.namespace_index} {self.namespace_uri}; security: {policies}; {anonymous}; {users} users in {where})"
+
+    # -- parts of start -------------------------------------------------------------------
+
+    async def _configure_security(self, server: Server) -> None:
+        settings = self.settings
+        assert self.pki is not None
+        if settings.secured:
+            if settings.certificate is not None and settings.private_key is not None:
+                certificate, key = settings.certificate, settings.private_key
+            else:
+                host = settings.host
+                hosts = [host] if host not in ("0.0.0.0", "::") else []
+                # Key generation takes a moment on first start: keep it off the loop.
+                certificate, key = await asyncio.to_thread(self.pki.ensure_server_certificate, settings.application_uri, hosts)
+            await server.load_certificate(str(certificate))
+            await server.load_private_key(str(key))
+        if POLICY_NONE in settings.policies and not settings.loopback:
+            log.warning("OPC UA offers SecurityPolicy None on %s: traffic and passwords are not protected", settings.host)
+        server.set_security_policy([POLICIES[p] for p in settings.policies], permission_ruleset=RolePermissions())
+        tokens: list[type] = [ua.UserNameIdentityToken]
+        if settings.anonymous_role is not None:
+            tokens.append(ua.AnonymousIdentityToken)
+        if settings.secured:
+            tokens.append(ua.X509IdentityToken)
+        server.set_identity_tokens(tokens)
+        self._secured_channels = SecuredChannels()
+        server.iserver.certificate_validator = ClientCertificateValidator(
+            self.pki, self._secured_channels, all_secured=POLICY_NONE not in settings.policies
+        )
+
+    async def _build_address_space(self, runtime: Runtime) -> None:
+        assert self.server is not None
+        iserver = self.server.iserver
+        db = runtime.db
+        ns = self.namespace_index
+        node_ids = {tag.name: tag_node_id(tag.name, ns) for tag in db}
+        self.publisher = Publisher(db, iserver.aspace, node_ids)
+        self.publisher.start()  # listen first: a change made while we build is pushed after
+        builder = AddressSpaceBuilder(iserver.aspace, ns)
+        roots = plan_folders((tag.definition for tag in db), self.settings.folder_size)
+        collecting = gc.isenabled()
+        gc.disable()  # building makes ~30 objects a node; collections meanwhile are pure cost
+        try:
+            await builder.build(roots, {tag.name: tag for tag in db})
+        finally:
+            if collecting:
+                gc.enable()
+        # A full collection over a big address space pauses the loop for 0.3 s+; the nodes
+        # live as long as the server, so move everything so far out of the collector's sight.
+        gc.freeze()
+        self.node_count = builder.node_count
+        self.writes = TagAttributeService(iserver.aspace, db, ns)
+        iserver.attribute_service = self.writes
+
+    def _after_listen(self, server: Server) -> None:
+        # Note the certificates of secured channels (see ClientCertificateValidator); done
+        # before the loop runs again, so no channel opens unnoticed.
+        policies: list[Any] = server._policies  # the list every connection reads its policies from
+        for index, factory in enumerate(policies):
+            policies[index] = TrackingPolicyFactory(factory, self._secured_channels, factory.cls is not SecurityPolicyNone)
+        host, port, path = self.settings.parsed_endpoint()
+        if server.bserver is not None and port == 0:
+            port = server.bserver.port
+            self.endpoint = f"opc.tcp://{host}:{port}{path}"
+            server.endpoint = urlparse(self.endpoint)
+            for description in server.iserver.endpoints:
+                description.EndpointUrl = self.endpoint
+                description.Server.DiscoveryUrls = [self.endpoint]
+
+
+def _current_time(node_id: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
+    now = datetime.now(timezone.utc)
+    return ua.DataValue(ua.Variant(now, ua.VariantType.DateTime), SourceTimestamp=now, ServerTimestamp=now)
+
+
+async def _quiet_stop(server: Server) -> None:
+    try:
+        await server.stop()
+    except Exception:
+        log.exception("stopping the OPC UA server failed")

@@ -1,0 +1,263 @@
+"""OPC UA users: a YAML file of names, roles and salted password hashes, and the login check.
+
+File format (written by `softplc users add/remove`; default `<state_dir>/users.yaml`):
+
+    users:
+      alice:  {role: operator, password: "scrypt$11$8$1$<salt>$<hash>"}
+      robot7: {role: operator, certificate: "<SHA-256 fingerprint of its client certificate>"}
+
+Passwords are stored as scrypt hashes with a random 16-byte salt; the parameters are in the
+string, so they can change without breaking old entries. asyncua checks a login synchronously
+inside the event loop that also runs the scan, so the cost is kept at a few milliseconds
+(scrypt N=2^11, r=8), successful logins are remembered for the process's lifetime (keyed by
+an HMAC under a random per-process key, never the password), and password checks are
+throttled: after 5 failed logins within a second, further unremembered logins are refused
+without hashing until the second has passed.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import logging
+import os
+import re
+import secrets
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+from asyncua.crypto.permission_rules import UserRole
+from asyncua.server.user_managers import UserManager
+
+from softplc.opcua.roles import ROLE_NAMES, Role, SessionUser
+from softplc.opcua.security import fingerprint, normalise_fingerprint
+from softplc.yamlsource import ConfigError, load_yaml
+
+log = logging.getLogger(__name__)
+
+USER_NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.@-]{1,64}$")
+MIN_PASSWORD_LENGTH = 8
+SCRYPT_LOG2_N, SCRYPT_R, SCRYPT_P = 11, 8, 1
+FAILURES_PER_SECOND = 5
+HEADER = "# softplc OPC UA users. Manage with: softplc users add NAME --role ROLE | softplc users list | softplc users remove NAME\n"
+
+
+def hash_password(password: str) -> str:
+    """A salted scrypt hash string for `password`."""
+    salt = os.urandom(16)
+    digest = _scrypt(password, salt, SCRYPT_LOG2_N, SCRYPT_R, SCRYPT_P)
+    return f"scrypt${SCRYPT_LOG2_N}${SCRYPT_R}${SCRYPT_P}${_b64(salt)}${_b64(digest)}"
+
+
+def verify_password(password: str, stored: str) -> bool:
+    """Whether `password` matches a hash string made by `hash_password`."""
+    try:
+        scheme, log2_n, r, p, salt, digest = stored.split("$")
+        if scheme != "scrypt":
+            return False
+        expected = base64.b64decode(digest)
+        actual = _scrypt(password, base64.b64decode(salt), int(log2_n), int(r), int(p))
+    except (ValueError, TypeError):
+        return False
+    return hmac.compare_digest(actual, expected)
+
+
+def _scrypt(password: str, salt: bytes, log2_n: int, r: int, p: int) -> bytes:
+    return hashlib.scrypt(password.encode("utf-8"), salt=salt, n=2**log2_n, r=r, p=p, maxmem=256 * 1024 * 1024, dklen=32)
+
+
+def _b64(data: bytes) -> str:
+    return base64.b64encode(data).decode("ascii")
+
+
+_DUMMY_HASH = hash_password(secrets.token_hex(8))  # checked for unknown names, so timing tells nothing
+
+
+@dataclass(frozen=True)
+class UserEntry:
+    """One user of the file."""
+
+    name: str
+    role: Role
+    password_hash: str | None = None
+    certificate: str | None = None  # SHA-256 fingerprint, lowercase hex
+
+
+class UserStore:
+    """The users file: read (re-read when it changes), edited by the CLI, asked at login."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._users: dict[str, UserEntry] = {}
+        self._stamp: tuple[int, int] | None = None
+        self.reload()
+
+    # -- reading ----------------------------------------------------------------------
+
+    def reload(self) -> None:
+        """(Re)read the file if it changed; a missing file means no users. Raises ConfigError."""
+        try:
+            stat = self.path.stat()
+        except FileNotFoundError:
+            self._users, self._stamp = {}, None
+            return
+        stamp = (stat.st_mtime_ns, stat.st_size)
+        if stamp == self._stamp:
+            return
+        self._users = _parse(self.path)
+        self._stamp = stamp
+
+    def refresh(self) -> None:
+        """Reload if changed; keep the old users (and log) if the new file is broken."""
+        try:
+            self.reload()
+        except ConfigError as error:
+            log.error("users file %s is invalid, keeping the previous users: %s", self.path, error)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._users
+
+    def get(self, name: str) -> UserEntry | None:
+        return self._users.get(name)
+
+    def entries(self) -> list[UserEntry]:
+        return list(self._users.values())
+
+    def by_certificate(self, der: bytes) -> UserEntry | None:
+        wanted = fingerprint(der)
+        for entry in self._users.values():
+            if entry.certificate == wanted:
+                return entry
+        return None
+
+    @property
+    def has_certificate_users(self) -> bool:
+        return any(entry.certificate for entry in self._users.values())
+
+    # -- editing (CLI) ------------------------------------------------------------------
+
+    def add(self, name: str, role: Role, password: str | None = None, certificate: str | None = None) -> UserEntry:
+        """Add or replace a user; needs a password or a certificate fingerprint."""
+        if not USER_NAME_PATTERN.match(name):
+            raise ValueError(f"invalid user name '{name}': use 1-64 letters, digits and _ . @ -")
+        if password is None and certificate is None:
+            raise ValueError("a user needs a password or a certificate")
+        if password is not None and len(password) < MIN_PASSWORD_LENGTH:
+            raise ValueError(f"the password must have at least {MIN_PASSWORD_LENGTH} characters")
+        print_ = normalise_fingerprint(certificate) if certificate else None
+        if print_ is not None and len(print_) != 64:
+            raise ValueError("the certificate fingerprint must be the full SHA-256 (64 hex digits)")
+        entry = UserEntry(name, role, hash_password(password) if password is not None else None, print_)
+        self._users[name] = entry
+        self.save()
+        return entry
+
+    def remove(self, name: str) -> None:
+        if name not in self._users:
+            raise KeyError(name)
+        del self._users[name]
+        self.save()
+
+    def save(self) -> None:
+        """Write the file atomically, readable by its owner only."""
+        data: dict[str, Any] = {"users": {}}
+        for entry in self._users.values():
+            item: dict[str, str] = {"role": entry.role.value}
+            if entry.password_hash:
+                item["password"] = entry.password_hash
+            if entry.certificate:
+                item["certificate"] = entry.certificate
+            data["users"][entry.name] = item
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        temporary = self.path.with_name(self.path.name + ".tmp")
+        fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w") as handle:
+            handle.write(HEADER)
+            yaml.safe_dump(data, handle, sort_keys=False, default_flow_style=False)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temporary, self.path)
+        stat = self.path.stat()
+        self._stamp = (stat.st_mtime_ns, stat.st_size)
+
+
+def _parse(path: Path) -> dict[str, UserEntry]:
+    data, source = load_yaml(path)
+    problems = []
+    users: dict[str, UserEntry] = {}
+    table = data.get("users") if isinstance(data, dict) else None
+    if data is not None and not isinstance(table, (dict, type(None))):
+        raise ConfigError([source.problem(("users",), "'users' must be a mapping of user name → {role, password}")])
+    for name, spec in (table or {}).items():
+        where = ("users", name)
+        if not isinstance(spec, dict):
+            problems.append(source.problem(where, f"user '{name}' must be a mapping with role and password"))
+            continue
+        role_name = spec.get("role")
+        if role_name not in ROLE_NAMES:
+            problems.append(source.problem((*where, "role") if "role" in spec else where, f"user '{name}': role must be one of {', '.join(ROLE_NAMES)}"))
+            continue
+        password, certificate = spec.get("password"), spec.get("certificate")
+        if not isinstance(password, (str, type(None))) or not isinstance(certificate, (str, type(None))) or (password is None and certificate is None):
+            problems.append(source.problem(where, f"user '{name}' needs a password hash (softplc users add) or a certificate fingerprint"))
+            continue
+        users[str(name)] = UserEntry(str(name), Role(role_name), password, normalise_fingerprint(certificate) if certificate else None)
+    if problems:
+        raise ConfigError(problems)
+    return users
+
+
+class SoftplcUserManager(UserManager):
+    """asyncua user manager: users file logins, certificate logins, optional anonymous viewer.
+
+    Never grants asyncua's Admin role, so AccessLevel and node management rules always apply.
+    """
+
+    def __init__(self, store: UserStore, anonymous: Role | None) -> None:
+        self.store = store
+        self.anonymous = anonymous
+        self._key = secrets.token_bytes(32)
+        self._remembered: dict[bytes, tuple[str, str | None]] = {}  # HMAC → (name, hash it matched)
+        self._failures: deque[float] = deque()
+
+    def get_user(self, iserver: Any, username: str | None = None, password: str | None = None, certificate: Any = None) -> SessionUser | None:
+        self.store.refresh()
+        if username:
+            return self._password_login(username, password or "")
+        if certificate:
+            # A certificate here was proven: either an X509 identity token's signature was
+            # checked, or it is the certificate of the secured channel the session runs on.
+            entry = self.store.by_certificate(bytes(certificate))
+            if entry is not None:
+                return SessionUser(role=UserRole.User, name=entry.name, access=entry.role)
+        if self.anonymous is not None:
+            return SessionUser(role=UserRole.User, name="anonymous", access=self.anonymous)
+        return None
+
+    def _password_login(self, username: str, password: str) -> SessionUser | None:
+        entry = self.store.get(username)
+        token = hmac.new(self._key, f"{username}\0{password}".encode(), hashlib.sha256).digest()
+        remembered = self._remembered.get(token)
+        if remembered is not None and entry is not None and remembered == (entry.name, entry.password_hash):
+            return SessionUser(role=UserRole.User, name=entry.name, access=entry.role)
+        now = time.monotonic()
+        while self._failures and now - self._failures[0] > 1.0:
+            self._failures.popleft()
+        if len(self._failures) >= FAILURES_PER_SECOND:
+            log.warning("login of '%s' refused without checking: too many failed logins in the last second", username)
+            return None
+        stored = entry.password_hash if entry is not None and entry.password_hash else _DUMMY_HASH
+        if verify_password(password, stored) and entry is not None and entry.password_hash:
+            if len(self._remembered) > 1000:
+                self._remembered.clear()
+            self._remembered[token] = (entry.name, entry.password_hash)
+            log.info("user '%s' logged in (%s)", entry.name, entry.role.value)
+            return SessionUser(role=UserRole.User, name=entry.name, access=entry.role)
+        self._failures.append(now)
+        log.warning("failed OPC UA login for user '%s'", username)
+        return None

@@ -1,0 +1,148 @@
+"""Client writes, validated per item like a PLC, and journaled into the tag database.
+
+asyncua's own Write path checks only AccessLevel and exact Variant types, lets Admin bypass
+both, and writes straight into the address space. A PreWrite callback cannot veto an item.
+So the server's attribute service is replaced (`iserver.attribute_service`, the object every
+session's Write goes through) by `TagAttributeService`, which answers each item of a Write:
+
+    Good                      valid: journaled, applied at the next scan-cycle boundary
+    BadNodeIdUnknown          no such node
+    BadNotWritable            a folder, a property, an attribute other than Value, or an
+                              `ro` tag written by an operator
+    BadUserAccessDenied       the session's role may not write (viewer, anonymous)
+    BadTypeMismatch           wrong type (see `variants.value_from_variant` for the lossless
+                              conversions accepted)
+    BadOutOfRange             outside the tag's min/max, or outside its type's range
+    BadWriteNotSupported      a StatusCode other than Good (clients cannot set quality)
+    BadIndexRangeInvalid      an IndexRange (tags are scalars)
+
+Nothing of an invalid item is applied; valid items of the same Write are journaled together,
+so a scan sees all of them or none. The address space is never written here: it follows the
+tag database (see `publisher.py`), so a read right after a Write returns the old value until
+the next cycle boundary (at most one task interval), exactly as a PLC answers.
+
+Same tag written by a client and a program in one cycle: the journal is applied at the start
+of the cycle, so the program sees the client's value in its input image; if the program then
+writes a different value, the program's value wins (it decided knowing the client's value).
+A program that does not assign the output leaves the client's value in place.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from typing import Any
+
+from asyncua import ua
+from asyncua.common.utils import ServiceError
+from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.server.address_space import AddressSpace, AttributeService
+
+from softplc.opcua.roles import Role, role_of
+from softplc.opcua.variants import WriteStatus, value_from_variant
+from softplc.tagdb import Rule, TagDatabase, WriteRejected
+
+log = logging.getLogger(__name__)
+
+# Requests bigger than this are refused whole (BadTooManyOperations), so one client cannot
+# hold the event loop (and the scan) for long with a single huge Read or Write.
+MAX_NODES_PER_READ = 20_000
+MAX_NODES_PER_WRITE = 5_000
+_YIELD_EVERY = 500
+
+_RULE_CODES = {
+    Rule.UNKNOWN_TAG: ua.StatusCodes.BadNodeIdUnknown,
+    Rule.READ_ONLY: ua.StatusCodes.BadNotWritable,
+    Rule.TYPE_MISMATCH: ua.StatusCodes.BadTypeMismatch,
+    Rule.OUT_OF_RANGE: ua.StatusCodes.BadOutOfRange,
+}
+
+
+class TagAttributeService(AttributeService):
+    """asyncua's attribute service with our Write: per-item validation into the write journal."""
+
+    def __init__(self, aspace: AddressSpace, db: TagDatabase, namespace_index: int) -> None:
+        super().__init__(aspace)
+        self.db = db
+        self.ns = namespace_index
+        self.accepted = 0
+        self.rejected = 0
+
+    def read(self, params: ua.ReadParameters) -> list[ua.DataValue]:
+        if len(params.NodesToRead) > MAX_NODES_PER_READ:
+            raise ServiceError(ua.StatusCodes.BadTooManyOperations)
+        return super().read(params)
+
+    async def write(self, params: ua.WriteParameters, user: User = User(role=UserRole.Admin)) -> list[ua.StatusCode]:
+        items = params.NodesToWrite
+        if len(items) > MAX_NODES_PER_WRITE:
+            raise ServiceError(ua.StatusCodes.BadTooManyOperations)
+        role = role_of(user)
+        source = f"opcua:{getattr(user, 'name', None) or ('internal' if role is None else 'anonymous')}"
+        results: list[ua.StatusCode | None] = [None] * len(items)
+        normal: list[tuple[str, Any]] = []
+        forced: list[tuple[str, Any]] = []
+        foreign: list[int] = []
+        for index, item in enumerate(items):
+            if index and index % _YIELD_EVERY == 0:
+                await asyncio.sleep(0)  # a long request must not hold the scan
+            if item.NodeId.NamespaceIndex != self.ns or not isinstance(item.NodeId.Identifier, str):
+                if role is None:
+                    foreign.append(index)  # the server's own code writing a standard node
+                else:
+                    results[index] = self._not_ours(item.NodeId)
+                continue
+            try:
+                name, value, force = self._check(item, role)
+            except WriteStatus as refused:
+                results[index] = ua.StatusCode(refused.code)
+                log.info("%s: write %s refused: %s", source, item.NodeId.Identifier, refused.detail)
+                continue
+            (forced if force else normal).append((name, value))
+            results[index] = ua.StatusCode()
+        # Valid items of one request enter the journal together: one cycle applies all of them.
+        for batch, client in ((normal, True), (forced, False)):
+            if batch:
+                for rejected in self.db.submit(batch, source, client=client):
+                    if rejected is not None:  # validated above; kept as a guard
+                        log.error("%s: journal refused %s after validation", source, rejected)
+        for index in foreign:
+            single = ua.WriteParameters(NodesToWrite=[items[index]])
+            results[index] = (await super().write(single, user))[0]
+        accepted = sum(1 for status in results if status is not None and status.is_good())
+        self.accepted += accepted
+        self.rejected += len(items) - accepted
+        return [status if status is not None else ua.StatusCode(ua.StatusCodes.BadInternalError) for status in results]
+
+    def _not_ours(self, node_id: ua.NodeId) -> ua.StatusCode:
+        if node_id in self._aspace:
+            return ua.StatusCode(ua.StatusCodes.BadNotWritable)
+        return ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
+
+    def _check(self, item: ua.WriteValue, role: Role | None) -> tuple[str, Any, bool]:
+        """(tag name, coerced value, forced) for a valid item, else raise WriteStatus."""
+        name = item.NodeId.Identifier
+        tag = self.db.get(name)
+        if tag is None:
+            if item.NodeId in self._aspace:
+                raise WriteStatus(ua.StatusCodes.BadNotWritable, "not a tag (folder or property)")
+            raise WriteStatus(ua.StatusCodes.BadNodeIdUnknown, "no such tag")
+        if item.AttributeId != ua.AttributeIds.Value:
+            raise WriteStatus(ua.StatusCodes.BadNotWritable, f"attribute {item.AttributeId} is not writable")
+        if item.IndexRange:
+            raise WriteStatus(ua.StatusCodes.BadIndexRangeInvalid, "tags are scalars; no IndexRange")
+        if role is not None and not role.may_write:
+            raise WriteStatus(ua.StatusCodes.BadUserAccessDenied, f"role {role.value} may not write")
+        definition = tag.definition
+        force = not definition.writable_by_clients
+        if force and role is not None and not role.may_write_read_only:
+            raise WriteStatus(ua.StatusCodes.BadNotWritable, "the tag is read-only")
+        data = item.Value
+        if data.StatusCode is not None and not data.StatusCode.is_good():
+            raise WriteStatus(ua.StatusCodes.BadWriteNotSupported, "clients cannot write a tag's quality")
+        value = value_from_variant(definition, data.Value)
+        try:
+            value = self.db.validate(name, value, client=not force)
+        except WriteRejected as rejected:
+            raise WriteStatus(_RULE_CODES[rejected.rule], rejected.detail) from None
+        return name, value, force

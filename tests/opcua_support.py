@@ -1,0 +1,158 @@
+"""Helpers for the OPC UA tests: a small plant, users, a running server, client certificates, waiting."""
+
+from __future__ import annotations
+
+import asyncio
+import datetime
+import textwrap
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from asyncua import Client, ua
+from asyncua.crypto.cert_gen import dump_private_key_as_pem, generate_private_key, generate_self_signed_app_certificate
+from cryptography import x509
+from cryptography.hazmat.primitives import serialization
+from cryptography.x509.oid import ExtendedKeyUsageOID
+
+from softplc import InOut, Input, Output, Program
+from softplc.clock import RealClock
+from softplc.config import load_config
+from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
+from softplc.runtime import Runtime
+
+HERE = Path(__file__).resolve().parent
+
+PASSWORDS = {"viewer": "viewer-pass-1", "operator": "operator-pass-1", "engineer": "engineer-pass-1"}
+
+PLANT = f"""
+version: 1
+plant: {{name: opcua-test}}
+templates:
+  robot:
+    group: Robots
+    instances: [r01, r02]
+    tags:
+      xpos:   {{type: float64, unit: m, access: ro, description: x position}}
+      xgoal:  {{type: float64, unit: m, min: 0, max: 21.95, description: x goal}}
+      status: {{type: bool, description: busy}}
+tags:
+  b1:      {{type: bool}}
+  i16:     {{type: int16, min: -100, max: 100, unit: "%", description: a bounded int16}}
+  u16:     {{type: uint16}}
+  i32:     {{type: int32}}
+  u32:     {{type: uint32}}
+  f32:     {{type: float32, min: 0, max: 10, unit: m/s}}
+  f64:     {{type: float64}}
+  s1:      {{type: string, initial: hello}}
+  ro_i32:  {{type: int32, access: ro, initial: 7, description: read-only for clients}}
+  count:   {{type: uint32, access: ro, description: scans of the fast task}}
+  request: {{type: int32, description: written by clients}}
+  reply:   {{type: int32, access: ro, description: the program's echo of request}}
+tasks:
+  fast:
+    interval: 10ms
+    programs:
+      - name: ticker
+        program: tests.opcua_support:Ticker
+        bind: {{count: count, request: request, reply: reply}}
+"""
+
+
+class Ticker(Program):
+    """Counts scans and echoes `request` into `reply` (so a client write is seen by a program)."""
+
+    count = InOut("scan counter")
+    request = Input("client-written value")
+    reply = Output("echo of request")
+
+    def scan(self) -> None:
+        self.count = (self.count + 1) % 2**32
+        self.reply = self.request
+
+
+def write_config(directory: Path, text: str = PLANT) -> Path:
+    path = directory / "tagdb.yaml"
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def add_users(state_dir: Path) -> UserStore:
+    store = UserStore(state_dir / "users.yaml")
+    for role in Role:
+        store.add(role.value, role, PASSWORDS[role.value])
+    return store
+
+
+@asynccontextmanager
+async def running_plant(directory: Path, text: str = PLANT, **settings: Any) -> AsyncIterator[tuple[Runtime, OpcUaServer]]:
+    """A runtime (real time) with the OPC UA server on a free loopback port."""
+    config = load_config(write_config(directory, text))
+    state_dir = directory / "state"
+    state_dir.mkdir(exist_ok=True)
+    if not (state_dir / "users.yaml").exists():
+        add_users(state_dir)
+    settings.setdefault("endpoint", "opc.tcp://127.0.0.1:0/softplc/")
+    server = OpcUaServer(OpcUaSettings(**settings))
+    runtime = Runtime(config, RealClock(), state_dir=state_dir)
+    runtime.add_adapter(server)
+    await runtime.start()
+    try:
+        yield runtime, server
+    finally:
+        await runtime.stop()
+
+
+def client_for(server: OpcUaServer, user: str | None = None, password: str | None = None, timeout: float = 4) -> Client:
+    client = Client(server.endpoint, timeout=timeout)
+    if user is not None:
+        client.set_user(user)
+        client.set_password(password if password is not None else PASSWORDS[user])
+    return client
+
+
+async def wait_until(condition: Callable[[], Awaitable[bool] | bool], timeout: float = 5.0, interval: float = 0.01) -> None:
+    """Poll `condition` every `interval` until it holds; fail after `timeout` seconds."""
+    deadline = time.monotonic() + timeout
+    while True:
+        result = condition()
+        if asyncio.iscoroutine(result):
+            result = await result
+        if result:
+            return
+        if time.monotonic() > deadline:
+            raise AssertionError(f"condition not met within {timeout} s")
+        await asyncio.sleep(interval)
+
+
+@dataclass
+class ClientCertificate:
+    certificate: Path
+    key: Path
+    uri: str
+    der: bytes
+
+
+def make_client_certificate(directory: Path, name: str = "test-client") -> ClientCertificate:
+    """A self-signed OPC UA client application certificate (DER) and key (PEM)."""
+    key = generate_private_key()
+    uri = f"urn:softplc:test:{name}"
+    certificate = generate_self_signed_app_certificate(
+        key, name, {}, [x509.UniformResourceIdentifier(uri), x509.DNSName("localhost")],
+        extended=[ExtendedKeyUsageOID.CLIENT_AUTH], days=30,
+    )
+    der = certificate.public_bytes(serialization.Encoding.DER)
+    cert_path, key_path = directory / f"{name}.der", directory / f"{name}.pem"
+    cert_path.write_bytes(der)
+    key_path.write_bytes(dump_private_key_as_pem(key))
+    return ClientCertificate(cert_path, key_path, uri, der)
+
+
+def node(client: Client, ns: int, tag: str) -> Any:
+    return client.get_node(ua.NodeId(tag, ns))
+
+
+NOW = datetime.datetime.now
