@@ -193,12 +193,14 @@ class _Builder:
         self.template_sizes = {("templates", name, "tags"): len(instances) for name, instances in config.instances.items()}
 
     def problem(self, tag: TagDef, key: str | None, message: str) -> None:
+        """Report at the value of `modbus: {key: ...}`, or at the tag's name when key is None."""
         path = self.paths.get(tag.name)
         if path is None:
             self.problems.append(Problem(Location(self.source.file, 1, 1), f"{tag.name}: {message}"))
             return
-        full = (*path, "modbus", key) if key else (*path, "modbus")
-        self.problems.append(self.source.problem(full, message, at_key=key is None))
+        problem = self.source.problem((*path, "modbus", key), message) if key else self.source.problem(path, message, at_key=True)
+        if problem not in self.problems:  # a template's tag reports once, not once per instance
+            self.problems.append(problem)
 
     def where(self, mapping: Mapping) -> str:
         path = self.paths.get(mapping.name)
@@ -259,7 +261,7 @@ class _Builder:
             instances = self.template_sizes.get(path[:3], 1) if path[:1] == ("templates",) else 1
             if instances > 1:
                 self.problem(tag, "address", f"an address in a template would be shared by all {instances} instances; "
-                             "pin instance tags in a plain 'tags:' entry instead, or leave the template to auto-allocation")
+                             "leave template tags to automatic packing, or declare this tag per instance under 'tags:'")
                 return None
         mapping = self._default_mapping(tag, options["address"] if pinned else cursors[table], options, pinned=pinned, table=table)
         if mapping is None:

@@ -26,6 +26,7 @@ from pymodbus.simulator import SimData, SimDevice
 from softplc.config import PlantConfig
 from softplc.modbus.address_map import AddressMap, Table, build_address_map
 from softplc.modbus.codec import CodecError
+from softplc.modbus import lognoise
 from softplc.modbus.image import RegisterImage
 from softplc.modbus.requests import LIMITS, RequestGuard, guarded_requests
 from softplc.modbus.settings import ModbusSettings
@@ -62,6 +63,7 @@ class ModbusAdapter:
         self._image: RegisterImage | None = None
         self._db: TagDatabase | None = None
         self._unsubscribe: Callable[[], None] | None = None
+        self._remove_log_filter: Callable[[], None] | None = None
 
     @property
     def host(self) -> str:
@@ -86,6 +88,7 @@ class ModbusAdapter:
             self._stop_watching()
             raise AdapterError(f"Modbus TCP cannot listen on {settings.host}:{settings.port}: {error}") from None
         self._server = server
+        self._remove_log_filter = lognoise.install()
         sockets = getattr(server.transport, "sockets", None) or []
         self.port = sockets[0].getsockname()[1] if sockets else settings.port
         log.debug("Modbus TCP serving %d tags on %s:%s unit %d", len(self.map), settings.host, self.port, settings.unit_id)
@@ -105,6 +108,9 @@ class ModbusAdapter:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
+        if self._remove_log_filter is not None:
+            self._remove_log_filter()
+            self._remove_log_filter = None
 
     def _simdata(self) -> tuple[list[SimData], list[SimData], list[SimData], list[SimData]]:
         """One SimData per contiguous mapped run of each table (gaps stay invalid → 02)."""
