@@ -123,7 +123,7 @@ class Runtime:
         for task in self.tasks:
             for instance in task.programs:
                 if instance.state is ProgramState.FAULTED:
-                    instance.reset()
+                    instance.reset(self.clock.now())
         if self.state is RuntimeState.ERROR:
             self.state = RuntimeState.RUNNING
             self.error = ""

@@ -81,12 +81,12 @@ class ProgramInstance:
             names.extend([binding] if isinstance(binding, str) else binding)
         return names
 
-    def start(self) -> None:
+    def start(self, now: float = 0.0) -> None:
         """Run the program's setup; a setup that raises faults the program."""
         try:
             self.program.setup()
-        except Exception as error:
-            self.fault(error, 0.0)
+        except (Exception, SystemExit) as error:  # sys.exit() in a program must not end the runtime
+            self.fault(error, now)
 
     def fault(self, error: BaseException | str, now: float) -> None:
         self.state = ProgramState.FAULTED
@@ -103,13 +103,13 @@ class ProgramInstance:
         else:
             self._retry_at = math.inf
 
-    def reset(self) -> None:
+    def reset(self, now: float = 0.0) -> None:
         """Clear a fault and start again (an operator's reset)."""
         self.restarts = 0
         self.state = ProgramState.RUNNING
         self.error = ""
         self._retry_at = math.inf
-        self.start()
+        self.start(now)
 
     def maybe_restart(self, now: float) -> None:
         if self.state is ProgramState.FAULTED and now >= self._retry_at:
@@ -117,7 +117,7 @@ class ProgramInstance:
             log.warning("restarting program %s (restart %d of %d)", self.name, self.restarts, self.restart.max_restarts)
             self.state = ProgramState.RUNNING
             self._retry_at = math.inf
-            self.start()
+            self.start(now)  # a setup that fails again waits the full delay before the next try
 
     def scan(self, image: dict[str, Any], db: TagDatabase, now: float) -> dict[str, Any]:
         """Run one scan against `image`; return the validated outputs (empty if it faulted)."""
@@ -127,7 +127,7 @@ class ProgramInstance:
             attributes[var] = image[binding] if isinstance(binding, str) else [image[t] for t in binding]
         try:
             program.scan()
-        except Exception as error:
+        except (Exception, SystemExit) as error:  # sys.exit() in a program must not end the runtime
             self.fault(error, now)
             return {}
         outputs: dict[str, Any] = {}
