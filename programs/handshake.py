@@ -35,6 +35,8 @@ _NEVER = 365 * 24 * 3600.0
 
 
 class Handshake(Program):
+    scenarios = SCENARIOS  # read by `softplc latency` to know how long to wait for a Ready
+
     ready = InOut("set by the PLC when the running task is done; the client clears it (Ready)")
     task_id = Input("task assigned by the client: 1, 2 or 3 (TaskID)")
     delay = Output("delay from setting Ready to seeing the new TaskID in ms, scan-quantised (Delay)")
@@ -57,15 +59,20 @@ class Handshake(Program):
         self.active = 0  # the task the PLC is running or has just finished
         self.waiting = False  # Ready has been set and no new TaskID seen yet
         self.count = 0
+        self.scans_waited = 0  # scans run since the one that set Ready
 
     def scan(self) -> None:
         # The delay timer runs from the scan that sets Ready; update it first so it reads the
         # time of this scan, as a PLC timer called at the top of the program would.
         self.delay_timer(IN=self.waiting, PT=_NEVER)
+        if self.waiting:
+            self.scans_waited += 1
 
         if self.task_id in TASK_IDS and self.task_id != self.active:
             if self.waiting and self.active != 0:
-                scans = round(self.delay_timer.ET / self.scan_interval)
+                # In scans: the timer's time rounded to the scan, but never fewer than the scans
+                # that actually ran (a late start of the setting scan shortens the timer's view).
+                scans = max(self.scans_waited, round(self.delay_timer.ET / self.scan_interval))
                 self.delay_scans = scans
                 self.delay = scans * self.scan_interval * 1000.0
                 self.count += 1
@@ -85,4 +92,5 @@ class Handshake(Program):
             self.ready = True
             self.ready_stamp = self.clock.monotonic()
             self.delay_timer(IN=True, PT=_NEVER)
+            self.scans_waited = 0
         self.running_task = 0 if self.waiting else self.active

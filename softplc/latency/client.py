@@ -1,0 +1,227 @@
+"""The client side of the case IV handshake, run as its own process like any external program.
+
+    python -m softplc.latency.client --protocol opcua --endpoint opc.tcp://127.0.0.1:4841/softplc/ --samples 100
+
+It waits for Ready, answers with the next TaskID (1 → 2 → 3 → 1) and clears Ready, and prints
+one JSON line per event on stdout with its `time.monotonic()` readings: when it saw Ready
+(`t_seen`), started the write (`t_sent`) and had it acknowledged (`t_done`), plus what the PLC
+reported for that handshake (Delay, DelayScans, Handshakes, ReadyStamp). `softplc latency`
+starts it and reads these lines; nothing here knows about softplc's runtime.
+
+A handshake's PLC figures are published after the PLC saw the answer, so they are taken from
+the snapshot of the next Ready (or, for the last one, from the next change of Handshakes).
+The first answer is a warm-up: it may have been pending since before the client started.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, TextIO
+
+from softplc.latency.driver import ROLES, Driver, DriverError, ReadyTracker, Snapshot
+
+Emit = Callable[[dict[str, Any]], None]
+MAX_CONSECUTIVE_TIMEOUTS = 3
+
+
+@dataclass
+class Pending:
+    """An answer whose PLC-side figures have not been read yet."""
+
+    index: int  # 0 = warm-up
+    task_id: int
+    ready: Snapshot
+    t_sent: float
+    t_done: float
+
+
+class HandshakeClient:
+    """Answers Ready with the next TaskID until `samples` answers or `duration` seconds."""
+
+    def __init__(self, driver: Driver, emit: Emit, *, samples: int | None, duration: float | None, timeout: float) -> None:
+        if samples is None and duration is None:
+            raise ValueError("give samples or duration")
+        self.driver = driver
+        self.emit = emit
+        self.samples = samples
+        self.duration = duration
+        self.timeout = timeout
+        self.answers = 0  # not counting the warm-up
+        self.timeouts = 0
+        self.tracker = ReadyTracker()
+
+    def _finished(self, started: float) -> bool:
+        if self.samples is not None and self.answers >= self.samples:
+            return True
+        return self.duration is not None and time.monotonic() - started >= self.duration
+
+    async def run(self) -> None:
+        driver = self.driver
+        first = await driver.read()
+        next_task = first.task_id % 3 + 1 if first.task_id in (1, 2, 3) else 1
+        self.emit({"type": "hello", "pid": os.getpid(), "driver": driver.description, "serves": sorted(driver.serves),
+                   "task_id": first.task_id, "handshakes": first.handshakes, "t": time.monotonic()})
+        pending: Pending | None = None
+        started = time.monotonic()
+        consecutive = 0
+        index = 0
+        while True:
+            if pending is not None and pending.index > 0 and self._finished(started):
+                break
+            try:
+                ready = await driver.wait_ready(self.tracker, self.timeout)
+            except TimeoutError as error:
+                self.timeouts += 1
+                consecutive += 1
+                now = await driver.read()
+                still_waiting = pending is not None and now.ready and now.ready_stamp == pending.ready.ready_stamp
+                self.emit({"type": "timeout", "index": index, "waited": self.timeout, "message": str(error),
+                           "plc_waiting_for_answer": still_waiting, "t": time.monotonic()})
+                if consecutive >= MAX_CONSECUTIVE_TIMEOUTS:
+                    raise DriverError(f"{consecutive} timeouts in a row: the PLC sets no Ready (is it running the handshake?)") from None
+                if still_waiting and pending is not None:
+                    # The PLC still shows the Ready we answered: it never took our TaskID.
+                    # Report that answer as missed and answer the same Ready again.
+                    self._report(pending, now)
+                    self.tracker = ReadyTracker()
+                    next_task = pending.task_id
+                    pending = None
+                continue
+            consecutive = 0
+            t_sent = time.monotonic()
+            await driver.answer(next_task)
+            t_done = time.monotonic()
+            self.tracker.answered(ready)
+            if pending is not None:
+                self._report(pending, ready)
+            if index > 0:
+                self.answers += 1
+            pending = Pending(index, next_task, ready, t_sent, t_done)
+            index += 1
+            next_task = next_task % 3 + 1
+        # The last answer's PLC figures: wait for the PLC to count it (or time out).
+        last = await driver.wait_change(pending.ready.handshakes, self.timeout)
+        self._report(pending, last)
+        self.emit({"type": "done", "answers": self.answers, "timeouts": self.timeouts, "t": time.monotonic()})
+
+    def _report(self, pending: Pending, after: Snapshot) -> None:
+        """Emit the sample for `pending`, with the PLC's figures as read in `after`."""
+        before = pending.ready.handshakes
+        counted = None if before is None or after.handshakes is None else after.handshakes - before
+        if pending.ready.task_id == 0:
+            status = "start"  # TaskID 0 → 1 starts the sequence; the PLC neither times nor counts it
+        elif counted is None:
+            status = "ok"  # the PLC has no counter: take its Delay as ours
+        elif counted == 1:
+            status = "ok"
+        elif counted == 0:
+            status = "missed"  # the PLC did not take this TaskID
+        else:
+            status = "ok"  # the PLC counted more switches than we made: someone else answered too
+        event: dict[str, Any] = {
+            "type": "warmup" if pending.index == 0 else "sample",
+            "index": pending.index,
+            "task_id": pending.task_id,
+            "status": status,
+            "ready_stamp": pending.ready.ready_stamp,
+            "t_seen": pending.ready.received,
+            "t_sent": pending.t_sent,
+            "t_done": pending.t_done,
+            "plc_handshakes": after.handshakes,
+            "foreign": max(0, counted - 1) if counted is not None else 0,
+            "plc_delay_ms": after.delay if status == "ok" else None,
+            "plc_delay_scans": after.delay_scans if status == "ok" else None,
+        }
+        self.emit(event)
+
+
+def build_driver(args: argparse.Namespace) -> Driver:
+    """The driver for --protocol, with the node ids or addresses given per role."""
+    overrides = parse_tags(args.tag or [])
+    if args.protocol == "opcua":
+        from softplc.latency.opcua_driver import DEFAULT_NODE_IDS, OpcuaDriver
+
+        node_ids = {**DEFAULT_NODE_IDS, **overrides}
+        return OpcuaDriver(
+            args.endpoint, node_ids, subscription=args.mode == "subscription",
+            publishing_interval=args.publishing_interval, poll_interval=args.poll_interval / 1000.0,
+            namespace=args.namespace, security=args.security, user=args.user, password=args.password,
+        )
+    from softplc.latency.modbus_driver import DEFAULT_ADDRESSES, ModbusDriver
+
+    if args.mode == "subscription":
+        raise DriverError("Modbus has no subscriptions: use --mode poll")
+    host, _, port = args.endpoint.removeprefix("modbus://").removeprefix("tcp://").rstrip("/").rpartition(":")
+    if not host or not port.isdigit():
+        raise DriverError(f"bad Modbus endpoint {args.endpoint!r}; write HOST:PORT, e.g. 127.0.0.1:5020")
+    addresses = {**DEFAULT_ADDRESSES, **overrides}
+    return ModbusDriver(host, int(port), addresses, unit_id=args.unit_id, word_order=args.word_order, poll_interval=args.poll_interval / 1000.0)
+
+
+def parse_tags(items: list[str]) -> dict[str, str]:
+    """`ROLE=ADDRESS` items (e.g. `ready=ns=3;s=ROI_Ready`, `delay=holding:20:uint16`); `ROLE=` drops a role."""
+    result: dict[str, str] = {}
+    for item in items:
+        role, sep, address = item.partition("=")
+        role = role.strip().lower().replace("-", "_")
+        if not sep or role not in ROLES:
+            raise DriverError(f"bad --tag {item!r}; write ROLE=ADDRESS with ROLE one of: {', '.join(ROLES)}")
+        result[role] = address.strip()
+    return result
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m softplc.latency.client", description="Answer a PLC's Ready with the next TaskID; print JSON lines.")
+    parser.add_argument("--protocol", choices=("opcua", "modbus"), required=True)
+    parser.add_argument("--endpoint", required=True, help="opc.tcp://HOST:PORT/PATH or HOST:PORT (Modbus)")
+    parser.add_argument("--mode", choices=("subscription", "poll"), default=None, help="default: subscription for OPC UA, poll for Modbus")
+    parser.add_argument("--samples", type=int, help="stop after N answers (after one warm-up answer)")
+    parser.add_argument("--duration", type=float, help="stop after S seconds")
+    parser.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for a Ready before counting a timeout")
+    parser.add_argument("--poll-interval", type=float, default=1.0, metavar="MS", help="polling period in ms (default 1)")
+    parser.add_argument("--publishing-interval", type=float, default=0.0, metavar="MS", help="OPC UA publishing interval in ms (default 0: at once)")
+    parser.add_argument("--tag", action="append", metavar="ROLE=ADDRESS", help="node id or Modbus address of a role (repeatable)")
+    parser.add_argument("--namespace", help="OPC UA namespace URI for {ns} in node ids (default: the server's last)")
+    parser.add_argument("--security", help="asyncua security string, e.g. Basic256Sha256,SignAndEncrypt,cert.pem,key.pem")
+    parser.add_argument("--user")
+    parser.add_argument("--password", default=os.environ.get("SOFTPLC_LATENCY_PASSWORD"))
+    parser.add_argument("--unit-id", type=int, default=1)
+    parser.add_argument("--word-order", choices=("big", "little"), default="big")
+    return parser
+
+
+def main(argv: list[str] | None = None, out: TextIO = sys.stdout) -> int:
+    args = build_parser().parse_args(argv)
+    if args.mode is None:
+        args.mode = "subscription" if args.protocol == "opcua" else "poll"
+
+    def emit(event: dict[str, Any]) -> None:
+        out.write(json.dumps(event) + "\n")
+        out.flush()
+
+    async def run() -> None:
+        driver = build_driver(args)
+        await driver.connect()
+        try:
+            await HandshakeClient(driver, emit, samples=args.samples, duration=args.duration, timeout=args.timeout).run()
+        finally:
+            await driver.close()
+
+    try:
+        asyncio.run(run())
+    except DriverError as error:
+        emit({"type": "error", "message": str(error), "t": time.monotonic()})
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,342 @@
+"""One latency measurement: a PLC (our runtime, or --endpoint) and the client process answering it.
+
+By default the handshake plant runs here, in real time, with only the protocol under test
+served on a free loopback port; the client is a separate Python process (`softplc.latency.
+client`) that speaks the protocol like any external program. Its JSON lines become `Sample`s.
+
+Nothing is dropped silently. When the client dies before finishing, the PLC is read once
+more over the protocol: a Ready left unanswered is a *missed* handshake, and switches the PLC
+counted that the client never reported are *unreported*.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import json
+import logging
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlparse
+
+from softplc.latency.plant import handshake_config, scenario_durations
+
+log = logging.getLogger(__name__)
+
+LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
+Progress = Callable[["Measurement"], None]
+
+
+@dataclass
+class Target:
+    """What to measure and how (the `softplc latency` options of one protocol × scenario)."""
+
+    protocol: str  # opcua | modbus
+    scenario: str  # slow | average | fast
+    scan: float = 0.01  # the PLC's scan in s (ours; for --endpoint, what the remote PLC runs)
+    client_mode: str | None = None  # subscription | poll; None: subscription for OPC UA, poll for Modbus
+    endpoint: str | None = None  # None: start our runtime
+    samples: int | None = None
+    duration: float | None = None
+    tags: list[str] = field(default_factory=list)  # ROLE=ADDRESS overrides for --endpoint
+    namespace: str | None = None
+    security: str | None = None
+    user: str | None = None
+    password: str | None = None
+    unit_id: int = 1
+    word_order: str = "big"
+    poll_interval_ms: float = 1.0
+    publishing_interval_ms: float = 0.0
+    timeout: float | None = None  # per Ready; default: the longest task + 1 s
+    loop: str = "asyncio"
+
+    @property
+    def mode(self) -> str:
+        return self.client_mode or ("subscription" if self.protocol == "opcua" else "poll")
+
+    @property
+    def label(self) -> str:
+        return f"{self.protocol} {self.scenario}"
+
+    def ready_timeout(self) -> float:
+        if self.timeout is not None:
+            return self.timeout
+        return max(scenario_durations(self.scenario)) + 1.0 + 3 * self.scan
+
+
+@dataclass
+class Sample:
+    """One answered handshake with its client timestamps (monotonic s) and the PLC's figures."""
+
+    index: int
+    task_id: int
+    status: str  # ok | missed | start (the warm-up answer that started the sequence)
+    ready_stamp: float | None
+    t_seen: float
+    t_sent: float
+    t_done: float
+    plc_delay_ms: float | None
+    plc_delay_scans: int | None
+    plc_handshakes: int | None
+
+    @classmethod
+    def from_event(cls, event: dict[str, Any]) -> Sample:
+        return cls(**{name: event.get(name) for name in cls.__dataclass_fields__})  # type: ignore[arg-type]
+
+    def hires_ms(self, same_clock: bool) -> float | None:
+        """Ready set in the PLC → TaskID write acknowledged by it: the protocol's share of the delay."""
+        if not same_clock or self.ready_stamp is None:
+            return None
+        return (self.t_done - self.ready_stamp) * 1000.0
+
+    def notify_ms(self, same_clock: bool) -> float | None:
+        """Ready set in the PLC → the client saw it (push or poll)."""
+        if not same_clock or self.ready_stamp is None:
+            return None
+        return (self.t_seen - self.ready_stamp) * 1000.0
+
+    def respond_ms(self) -> float:
+        """The client saw Ready → its write was acknowledged."""
+        return (self.t_done - self.t_seen) * 1000.0
+
+
+@dataclass
+class Measurement:
+    """Everything one run produced, counted."""
+
+    target: Target
+    endpoint: str = ""
+    same_clock: bool = False
+    driver: str = ""
+    samples: list[Sample] = field(default_factory=list)
+    warmup: list[Sample] = field(default_factory=list)
+    timeouts: int = 0
+    missed: int = 0  # a Ready never answered, or an answer the PLC did not take
+    unreported: int = 0  # answered, but the client died before reporting it
+    foreign: int = 0  # switches the PLC counted that another client made
+    errors: list[str] = field(default_factory=list)
+    client_pid: int | None = None
+    client_exit: int | None = None
+    client_stderr: list[str] = field(default_factory=list)
+    started: float = field(default_factory=time.time)
+    wall_seconds: float = 0.0
+    plc_task: dict[str, Any] = field(default_factory=dict)  # scan statistics of our runtime
+    conditions: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok_samples(self) -> list[Sample]:
+        return [sample for sample in self.samples if sample.status == "ok"]
+
+    @property
+    def complete(self) -> bool:
+        return self.client_exit == 0 and not self.errors
+
+
+def is_loopback(endpoint: str) -> bool:
+    host = urlparse(endpoint).hostname if "://" in endpoint else endpoint.rpartition(":")[0]
+    return (host or "") in LOOPBACK
+
+
+def client_command(target: Target, endpoint: str) -> list[str]:
+    """argv of the client process."""
+    argv = [sys.executable, "-m", "softplc.latency.client", "--protocol", target.protocol, "--endpoint", endpoint,
+            "--mode", target.mode, "--timeout", f"{target.ready_timeout():g}",
+            "--poll-interval", f"{target.poll_interval_ms:g}", "--publishing-interval", f"{target.publishing_interval_ms:g}",
+            "--unit-id", str(target.unit_id), "--word-order", target.word_order]
+    if target.samples is not None:
+        argv += ["--samples", str(target.samples)]
+    if target.duration is not None:
+        argv += ["--duration", f"{target.duration:g}"]
+    for tag in target.tags:
+        argv += ["--tag", tag]
+    for option, value in (("--namespace", target.namespace), ("--security", target.security), ("--user", target.user)):
+        if value:
+            argv += [option, value]
+    return argv
+
+
+async def measure(target: Target, progress: Progress | None = None, stop: asyncio.Event | None = None) -> Measurement:
+    """Run one measurement to the end (or until the client dies, or `stop` is set) and count everything."""
+    result = Measurement(target, conditions=conditions(target))
+    stop = stop or asyncio.Event()
+    if target.endpoint is not None:
+        result.endpoint = target.endpoint
+        result.same_clock = is_loopback(target.endpoint)
+        await _run_client(target, result, progress, stop)
+        return result
+    from softplc.adapters import build_adapters
+    from softplc.clock import RealClock
+    from softplc.runtime import Runtime
+
+    with tempfile.TemporaryDirectory(prefix="softplc-latency-") as state_dir:
+        state = Path(state_dir)
+        if target.protocol == "opcua":
+            config = handshake_config(target.scenario, target.scan, opcua_endpoint="opc.tcp://127.0.0.1:0/softplc/")
+            target = _with_opcua_login(target, state)
+            result.target = target
+        else:
+            config = handshake_config(target.scenario, target.scan, modbus_port=0)
+        runtime = Runtime(config, RealClock(), state_dir=state)
+        for adapter in build_adapters(config, None):
+            runtime.add_adapter(adapter)
+        await runtime.start()
+        try:
+            server: Any = next(a for a in runtime.adapters if a.name == target.protocol)
+            if target.protocol == "modbus":
+                result.endpoint = f"127.0.0.1:{server.port}"
+            else:
+                result.endpoint = server.endpoint
+            result.same_clock = True
+            await _run_client(target, result, progress, stop)
+        finally:
+            task = runtime.tasks[0]
+            result.plc_task = {"interval_ms": task.interval * 1e3, "cycles": task.stats.cycles, "overruns": task.stats.overruns,
+                               "start_latency_ms": task.stats.latency.summary(), "scan_ms": task.stats.scan.summary(),
+                               "program_state": task.programs[0].state.value, "program_error": task.programs[0].error}
+            await runtime.stop()
+    return result
+
+
+def _with_opcua_login(target: Target, state_dir: Path) -> Target:
+    """Our OPC UA server lets anonymous clients only read: give the client an operator login."""
+    import secrets
+    from dataclasses import replace
+
+    from softplc.opcua import DEFAULT_NAMESPACE, Role, UserStore
+
+    password = secrets.token_urlsafe(18)
+    UserStore(state_dir / "users.yaml").add("latency", Role.OPERATOR, password)
+    return replace(target, user="latency", password=password, namespace=target.namespace or DEFAULT_NAMESPACE)
+
+
+async def _run_client(target: Target, result: Measurement, progress: Progress | None, stop: asyncio.Event) -> None:
+    started = time.monotonic()
+    env = dict(os.environ)
+    if target.password:
+        env["SOFTPLC_LATENCY_PASSWORD"] = target.password
+    # The client must import this very softplc, wherever the command was started from.
+    package_root = str(Path(__file__).resolve().parents[2])
+    env["PYTHONPATH"] = package_root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    process = await asyncio.create_subprocess_exec(
+        *client_command(target, result.endpoint), stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env=env
+    )
+    result.client_pid = process.pid
+    log.debug("client process %d started: %s", process.pid, target.label)
+    stderr_tail: collections.deque[str] = collections.deque(maxlen=40)
+    stderr_task = asyncio.create_task(_drain(process.stderr, stderr_tail))
+    done = False
+    last_handshakes: int | None = None
+    assert process.stdout is not None
+
+    async def interrupt() -> None:
+        await stop.wait()
+        result.errors.append("interrupted by the user")
+        process.terminate()
+
+    interrupter = asyncio.create_task(interrupt())
+    try:
+        async for raw in process.stdout:
+            try:
+                event = json.loads(raw)
+            except json.JSONDecodeError:
+                stderr_tail.append(raw.decode(errors="replace").rstrip())
+                continue
+            kind = event.get("type")
+            if kind == "hello":
+                result.driver = event.get("driver", "")
+                last_handshakes = event.get("handshakes")
+            elif kind in ("sample", "warmup"):
+                sample = Sample.from_event(event)
+                (result.samples if kind == "sample" else result.warmup).append(sample)
+                if sample.status == "missed" and kind == "sample":
+                    result.missed += 1
+                result.foreign += int(event.get("foreign") or 0)
+                if sample.plc_handshakes is not None:
+                    last_handshakes = sample.plc_handshakes
+            elif kind == "timeout":
+                result.timeouts += 1
+            elif kind == "error":
+                result.errors.append(str(event.get("message")))
+            elif kind == "done":
+                done = True
+            result.wall_seconds = time.monotonic() - started
+            if progress is not None:
+                progress(result)
+        result.client_exit = await process.wait()
+    except asyncio.CancelledError:
+        process.kill()
+        await process.wait()
+        raise
+    finally:
+        interrupter.cancel()
+        await stderr_task
+        result.client_stderr = list(stderr_tail)
+        result.wall_seconds = time.monotonic() - started
+    if not done:
+        if stop.is_set():
+            pass  # the user stopped it: no missed handshake to account for
+        elif result.client_exit and result.client_exit < 0:
+            result.errors.append(f"the client process was killed by signal {-result.client_exit}")
+        elif not result.errors:
+            result.errors.append(f"the client process exited with code {result.client_exit} before finishing")
+        if not stop.is_set():
+            await _reconcile(target, result, last_handshakes)
+
+
+async def _drain(stream: asyncio.StreamReader | None, tail: collections.deque[str]) -> None:
+    if stream is None:
+        return
+    async for line in stream:
+        tail.append(line.decode(errors="replace").rstrip())
+
+
+async def _reconcile(target: Target, result: Measurement, last_handshakes: int | None) -> None:
+    """After the client died: count the Ready it left unanswered and the answers it never reported."""
+    from softplc.latency.client import build_driver, build_parser
+
+    argv = client_command(target, result.endpoint)[3:]
+    try:
+        args = build_parser().parse_args(argv)
+        args.mode = "poll"  # one read at a time is all this needs
+        args.password = target.password
+        driver = build_driver(args)
+        await driver.connect()
+    except Exception as error:
+        result.errors.append(f"cannot read the PLC after the client died: {error}")
+        return
+    try:
+        # The PLC may be in the middle of a task: wait for it to ask for the next one.
+        deadline = time.monotonic() + target.ready_timeout()
+        snapshot = await driver.read()
+        while not snapshot.ready and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
+            snapshot = await driver.read()
+        if snapshot.ready:
+            result.missed += 1
+        if snapshot.handshakes is not None and last_handshakes is not None:
+            result.unreported += max(0, snapshot.handshakes - last_handshakes)
+    except Exception as error:
+        result.errors.append(f"cannot read the PLC after the client died: {error}")
+    finally:
+        await driver.close()
+
+
+def conditions(target: Target) -> dict[str, Any]:
+    """The machine's state, so figures can be judged (CPU contention distorts them)."""
+    try:
+        load = os.getloadavg()
+    except OSError:
+        load = (float("nan"),) * 3
+    return {
+        "cpus": os.cpu_count(),
+        "load_average_1_5_15": [round(value, 2) for value in load],
+        "python": sys.version.split()[0],
+        "platform": sys.platform,
+        "event_loop": target.loop,
+    }

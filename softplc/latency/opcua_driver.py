@@ -1,0 +1,202 @@
+"""The handshake over OPC UA (asyncua client): by subscription or by polling.
+
+Node ids are given per role; `{ns}` in a node id stands for the namespace index of
+`namespace` (a URI) or, when none is given, of the server's last namespace — a softplc
+server's tag namespace. Writes carry the node's own variant type (servers check it strictly).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from typing import Any
+
+from asyncua import Client, Node, ua
+
+from softplc.latency.driver import REQUIRED_ROLES, TAG_NAMES, Driver, DriverError, PollingDriver, ReadyTracker, Snapshot
+
+log = logging.getLogger(__name__)
+
+DEFAULT_NODE_IDS: dict[str, str] = {role: f"ns={{ns}};s={name}" for role, name in TAG_NAMES.items()}
+
+
+class OpcuaDriver(PollingDriver):
+    """An asyncua client session on the handshake tags."""
+
+    def __init__(
+        self,
+        endpoint: str,
+        node_ids: dict[str, str],
+        *,
+        subscription: bool = True,
+        publishing_interval: float = 0.0,
+        poll_interval: float = 0.001,
+        namespace: str | None = None,
+        security: str | None = None,
+        user: str | None = None,
+        password: str | None = None,
+        timeout: float = 4.0,
+    ) -> None:
+        missing = [role for role in REQUIRED_ROLES if not node_ids.get(role)]
+        if missing:
+            raise DriverError(f"no node id for {', '.join(missing)}")
+        self.endpoint = endpoint
+        self.node_ids = {role: node_id for role, node_id in node_ids.items() if node_id}
+        self.subscription = subscription
+        self.publishing_interval = publishing_interval
+        self.poll_interval = poll_interval
+        self.namespace = namespace
+        self.security = security
+        self.client = Client(endpoint, timeout=timeout)
+        if user:
+            self.client.set_user(user)
+            self.client.set_password(password or "")
+        self.nodes: dict[str, Node] = {}
+        self.types: dict[str, ua.VariantType] = {}
+        self._roles: list[str] = []
+        self._latest: dict[str, Any] = {}
+        self._changed = asyncio.Event()
+        self._ready_seen_at = 0.0
+        mode = f"subscription, publishing interval {publishing_interval:g} ms" if subscription else f"polling every {poll_interval * 1e3:g} ms"
+        self.description = f"OPC UA {endpoint} ({mode})"
+
+    @property
+    def serves(self) -> set[str]:
+        return set(self.nodes)
+
+    async def connect(self) -> None:
+        if self.security:
+            await self.client.set_security_string(self.security)
+        try:
+            await self.client.connect()
+        except Exception as error:
+            raise DriverError(f"cannot connect to {self.endpoint}: {error!r}") from None
+        namespace_index = await self._namespace_index()
+        for role, node_id in self.node_ids.items():
+            text = node_id.replace("{ns}", str(namespace_index))
+            try:
+                node = self.client.get_node(text)
+                self.types[role] = await node.read_data_type_as_variant_type()
+            except Exception as error:
+                raise DriverError(f"{role}: node {text} is not readable: {error!r}") from None
+            self.nodes[role] = node
+        self._roles = list(self.nodes)
+        if self.subscription:
+            await self._subscribe()
+
+    async def _namespace_index(self) -> int:
+        names = await self.client.get_namespace_array()
+        if self.namespace is None:
+            return len(names) - 1
+        if self.namespace not in names:
+            raise DriverError(f"the server has no namespace {self.namespace!r}; it has: {', '.join(names)}")
+        return names.index(self.namespace)
+
+    async def _subscribe(self) -> None:
+        params = ua.CreateSubscriptionParameters()
+        params.RequestedPublishingInterval = self.publishing_interval
+        params.RequestedLifetimeCount = 10000
+        # A keep-alive at least every few seconds, even with a 0 ms publishing interval.
+        params.RequestedMaxKeepAliveCount = 10000 if self.publishing_interval <= 0 else max(3, int(3000 / self.publishing_interval))
+        params.MaxNotificationsPerPublish = 0
+        params.PublishingEnabled = True
+        params.Priority = 0
+        self._sub = await self.client.create_subscription(params, self)
+        by_node = {node.nodeid: role for role, node in self.nodes.items()}
+        self._role_of = by_node
+        results = await self._sub.subscribe_data_change(list(self.nodes.values()), queuesize=1, sampling_interval=0.0)
+        for role, result in zip(self.nodes, results):
+            if isinstance(result, ua.StatusCode):
+                raise DriverError(f"cannot subscribe to {role} ({self.nodes[role].nodeid.to_string()}): {result}")
+
+    def datachange_notification(self, node: Node, value: Any, data: Any) -> None:
+        """asyncua calls this for each pushed value, in the order the server sent them."""
+        role = self._role_of.get(node.nodeid)
+        if role is None:
+            return
+        self._latest[role] = value
+        if role == "ready" and value:
+            self._ready_seen_at = time.monotonic()
+        self._changed.set()
+
+    def status_change_notification(self, status: Any) -> None:
+        log.warning("subscription status changed: %s", status)
+
+    async def close(self) -> None:
+        try:
+            await self.client.disconnect()
+        except Exception as error:  # the server may be gone already
+            log.debug("disconnect: %r", error)
+
+    async def read(self) -> Snapshot:
+        try:
+            values = await self.client.read_values([self.nodes[role] for role in self._roles])
+        except Exception as error:
+            raise DriverError(f"read failed: {error!r}") from None
+        return _snapshot(dict(zip(self._roles, values)), time.monotonic())
+
+    async def answer(self, task_id: int) -> None:
+        items = [(self.nodes["task_id"], ua.DataValue(ua.Variant(task_id, self.types["task_id"])))]
+        items.append((self.nodes["ready"], ua.DataValue(ua.Variant(False, self.types["ready"]))))
+        try:
+            results = await self.client.write_values([node for node, _ in items], [value for _, value in items], raise_on_partial_error=False)
+        except Exception as error:
+            raise DriverError(f"write failed: {error!r}") from None
+        bad = [f"{role}: {result.name}" for role, result in zip(("TaskID", "Ready"), results) if not result.is_good()]
+        if bad:
+            raise DriverError("write refused: " + ", ".join(bad))
+
+    async def wait_ready(self, tracker: ReadyTracker, timeout: float) -> Snapshot:
+        if not self.subscription:
+            return await super().wait_ready(tracker, timeout)
+        deadline = time.monotonic() + timeout
+        while True:
+            snapshot = self._cached()
+            if snapshot is not None and tracker.observe(snapshot):
+                return snapshot.at(self._ready_seen_at or time.monotonic())
+            await self._wait_push(deadline, f"no new Ready pushed within {timeout:g} s")
+
+    async def wait_change(self, handshakes: int | None, timeout: float) -> Snapshot:
+        if not self.subscription:
+            return await super().wait_change(handshakes, timeout)
+        deadline = time.monotonic() + timeout
+        while True:
+            snapshot = self._cached()
+            if snapshot is not None and snapshot.handshakes != handshakes:
+                return snapshot
+            try:
+                await self._wait_push(deadline, "")
+            except TimeoutError:
+                return snapshot if snapshot is not None else await self.read()
+
+    def _cached(self) -> Snapshot | None:
+        if "ready" not in self._latest:
+            return None
+        return _snapshot(self._latest, time.monotonic())
+
+    async def _wait_push(self, deadline: float, message: str) -> None:
+        self._changed.clear()
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            raise TimeoutError(message)
+        try:
+            await asyncio.wait_for(self._changed.wait(), remaining)
+        except TimeoutError:
+            raise TimeoutError(message) from None
+
+
+def _snapshot(values: dict[str, Any], received: float) -> Snapshot:
+    def number(role: str, kind: type) -> Any:
+        value = values.get(role)
+        return None if value is None else kind(value)
+
+    return Snapshot(
+        ready=bool(values.get("ready")),
+        task_id=number("task_id", int),
+        delay=number("delay", float),
+        delay_scans=number("delay_scans", int),
+        handshakes=number("handshakes", int),
+        ready_stamp=number("ready_stamp", float),
+        received=received,
+    )

@@ -1,0 +1,168 @@
+"""`softplc latency` for real: our runtime in real time, the client in its own process, over loopback."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from softplc.clock import RealClock
+from softplc.latency.measurement import Measurement, Target, measure
+from softplc.latency.plant import handshake_config
+from softplc.latency.report import to_json
+from softplc.runtime import Runtime
+
+from conftest import REPO
+
+SAMPLES = 24
+
+
+async def run_cli(*args: str, timeout: float = 120.0, env: dict[str, str] | None = None) -> tuple[int, str, str]:
+    """Run `softplc ARGS` as a separate process; return (exit code, stdout, stderr)."""
+    process = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "softplc.cli", *args, cwd=REPO,
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env={**os.environ, **(env or {})},
+    )
+    try:
+        stdout, stderr = await asyncio.wait_for(process.communicate(), timeout)
+    except TimeoutError:
+        process.kill()
+        await process.wait()
+        raise
+    return process.returncode or 0, stdout.decode(), stderr.decode()
+
+
+def check_run(run: dict[str, Any], protocol: str, samples: int, *, hires: bool = True) -> None:
+    """The JSON of one run has every field, and the values make sense for a 10 ms scan."""
+    assert run["protocol"] == protocol and run["scenario"] == "fast" and run["scan_ms"] == 10.0
+    assert run["complete"] is True and run["errors"] == []
+    assert run["samples"] == samples and run["warmup"] == 1
+    assert run["missed"] == 0 and run["timeouts"] == 0 and run["unreported"] == 0
+    plc = run["plc"]
+    for key in ("samples", "mean", "std", "mean_plus_std", "worst", "share_le_20", "share_20_40", "share_gt_40", "percentiles", "histogram"):
+        assert key in plc, key
+    assert plc["samples"] == samples
+    # Quantised to the 10 ms scan: never below one scan, always a whole number of scans.
+    assert 10.0 <= plc["mean"] <= plc["worst"]
+    assert plc["best"] >= 10.0
+    assert plc["share_le_20"] + plc["share_20_40"] + plc["share_gt_40"] == pytest.approx(100.0)
+    assert set(plc["percentiles"]) == {"p50", "p95", "p99", "p999"}
+    assert run["one_scan_percent"] is not None and 0 <= run["one_scan_percent"] <= 100
+    assert run["thesis"]["mean"] == 15.8 and run["thesis"]["samples"] == 1117
+    assert run["ratio_to_thesis"]["mean"] == pytest.approx(plc["mean"] / 15.8)
+    if hires:
+        high = run["hires"]
+        assert high["samples"] == samples
+        # Ready → write acknowledged happens between the two scans that see it: 0 < hi-res < PLC delay + a scan.
+        assert 0.0 < high["best"] and high["mean"] < plc["mean"] + 10.0
+        assert run["notify"]["mean"] + run["respond"]["mean"] == pytest.approx(high["mean"], rel=1e-6)
+    else:
+        assert run["hires"]["samples"] == 0
+    assert run["respond"]["samples"] == samples and run["respond"]["best"] > 0.0
+
+
+@pytest.mark.parametrize("protocol", ["opcua", "modbus"])
+async def test_short_real_run_json(protocol, tmp_path):
+    code, stdout, stderr = await run_cli("latency", "--protocol", protocol, "--scenario", "fast", "--samples", str(SAMPLES),
+                                         "--json", "--out", str(tmp_path))
+    assert code == 0, stderr
+    data = json.loads(stdout)
+    (run,) = data["runs"]
+    check_run(run, protocol, SAMPLES)
+    assert run["local_runtime"] is True and run["same_clock"] is True
+    assert run["plc_task"]["program_state"] == "RUNNING"
+    # The table went to stderr, beside the thesis's.
+    assert "Mean (ms)" in stderr and "15.8" in stderr
+    # --out: every sample in the CSV (plus the warm-up), the statistics, a figure.
+    lines = (tmp_path / "samples.csv").read_text().splitlines()
+    assert len(lines) == 1 + SAMPLES + 1
+    assert json.loads((tmp_path / "statistics.json").read_text())["runs"][0]["samples"] == SAMPLES
+    figure = tmp_path / f"latency-{protocol}-fast-10ms.png"
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+async def test_killed_client_counts_the_missed_handshake():
+    killed: list[int] = []
+
+    def kill_after_five(run: Measurement) -> None:
+        if len(run.samples) >= 5 and not killed and run.client_pid:
+            os.kill(run.client_pid, signal.SIGKILL)
+            killed.append(run.client_pid)
+
+    result = await measure(Target("modbus", "fast", scan=0.01, samples=200), kill_after_five)
+    assert killed
+    assert len(result.samples) == 5
+    assert result.client_exit == -signal.SIGKILL
+    assert any("signal 9" in error for error in result.errors)
+    # The PLC went on and set Ready; nobody answered it. An answer the client made but never
+    # reported (killed in between) is counted too, never dropped.
+    assert result.missed == 1
+    assert result.unreported in (0, 1)
+    data = to_json(result)
+    assert data["complete"] is False and data["missed"] == 1 and data["samples"] == 5
+
+
+async def _serve_handshake(tmp_path: Path, protocol: str) -> tuple[Runtime, str]:
+    """A second runtime with the handshake plant, as a user would run it with `softplc run`."""
+    from softplc.adapters import build_adapters
+
+    if protocol == "opcua":
+        from softplc.opcua import Role, UserStore
+
+        UserStore(tmp_path / "users.yaml").add("tester", Role.OPERATOR, "handshake-test-password")
+        config = handshake_config("fast", 0.01, opcua_endpoint="opc.tcp://127.0.0.1:0/softplc/")
+    else:
+        config = handshake_config("fast", 0.01, modbus_port=0)
+    runtime = Runtime(config, RealClock(), state_dir=tmp_path)
+    for adapter in build_adapters(config, None):
+        runtime.add_adapter(adapter)
+    await runtime.start()
+    server: Any = runtime.adapters[0]
+    return runtime, server.endpoint if protocol == "opcua" else f"127.0.0.1:{server.port}"
+
+
+async def test_endpoint_opcua_against_a_second_runtime(tmp_path):
+    runtime, endpoint = await _serve_handshake(tmp_path, "opcua")
+    try:
+        code, stdout, stderr = await run_cli("latency", "--endpoint", endpoint, "--samples", "12", "--json",
+                                             "--user", "tester", env={"SOFTPLC_LATENCY_PASSWORD": "handshake-test-password"})
+        assert code == 0, stderr
+        (run,) = json.loads(stdout)["runs"]
+        check_run(run, "opcua", 12)
+        assert run["local_runtime"] is False and run["endpoint"] == endpoint
+        # The PLC counted exactly the switches the client reported.
+        assert runtime.db.value("Handshakes") >= 12
+    finally:
+        await runtime.stop()
+
+
+async def test_endpoint_modbus_third_party_layout(tmp_path):
+    """A PLC exposing only Ready, TaskID and Delay (no counter, no stamp): PLC delays, no hi-res."""
+    runtime, endpoint = await _serve_handshake(tmp_path, "modbus")
+    try:
+        code, stdout, stderr = await run_cli("latency", "--endpoint", endpoint, "--samples", "9", "--json",
+                                             "--tag", "ready=holding:0", "--tag", "task_id=holding:1", "--tag", "delay=holding:7:float64",
+                                             "--tag", "handshakes=", "--tag", "ready_stamp=", "--tag", "delay_scans=")
+        assert code == 0, stderr
+        (run,) = json.loads(stdout)["runs"]
+        check_run(run, "modbus", 9, hires=False)
+        assert run["driver"].startswith("Modbus TCP " + endpoint)
+    finally:
+        await runtime.stop()
+
+
+async def test_bad_options_are_clear():
+    code, _, stderr = await run_cli("latency", "--protocol", "modbus", "--client", "subscription")
+    assert code == 1 and "Modbus has no subscriptions" in stderr
+    code, _, stderr = await run_cli("latency", "--protocol", "opcua", "--endpoint", "127.0.0.1:502")
+    assert code == 1 and "does not look like opcua" in stderr
+    code, _, stderr = await run_cli("latency", "--endpoint", "127.0.0.1:1", "--samples", "3", "--tag", "ready=nowhere:1")
+    assert code == 1 and "bad Modbus address 'nowhere:1'" in stderr
+    code, _, stderr = await run_cli("latency", "--endpoint", "127.0.0.1:1", "--samples", "3")
+    assert code == 1 and "cannot connect to Modbus TCP 127.0.0.1:1" in stderr
