@@ -63,8 +63,10 @@ class DataType(enum.Enum):
 
         Accepted lossless conversions: bool ← bool or 0/1 integers; integers ← integers and
         floats with an integral value (3.0 → 3); floats ← integers and floats (float32 is
-        rounded to single precision); string ← string only.
+        rounded to single precision); string ← string only. NumPy scalars count as the Python
+        value they hold, and the result is always a plain Python value.
         """
+        value = _native(value)
         if self is DataType.BOOL:
             if isinstance(value, bool):
                 return value
@@ -103,6 +105,15 @@ _INT_RANGES: dict[DataType, tuple[int, int]] = {
 }
 
 TYPE_NAMES: tuple[str, ...] = tuple(t.value for t in DataType)
+
+
+def _native(value: Any) -> Any:
+    """A NumPy scalar (what scikit-learn or numpy code returns) as its Python value."""
+    if type(value) in (bool, int, float, str):
+        return value
+    if getattr(value, "shape", None) == () and hasattr(value, "item"):
+        return value.item()  # np.int64(1) → 1, np.bool_(True) → True, np.float32(0.5) → 0.5
+    return value
 
 
 def _describe(value: Any) -> str:

@@ -145,3 +145,18 @@ class Follower(Program):
 
     def scan(self) -> None:
         self.target = self.source
+
+
+class NumpyWriter(Program):
+    """Writes NumPy scalars, as code using numpy or scikit-learn naturally does."""
+
+    label = Output("an integer from numpy")
+    flag = Output("a bool from numpy")
+    level = Output("a float from numpy")
+
+    def scan(self) -> None:
+        import numpy as np
+
+        self.label = np.int64(1)
+        self.flag = np.bool_(True)
+        self.level = np.float32(0.25)

@@ -402,3 +402,24 @@ async def test_a_setup_failing_again_after_a_restart_waits_the_full_delay(sim_ru
         assert (instance.restarts, instance.faults, instance.state.value) == (3, 4, "FAULTED")
     finally:
         await runtime.stop()
+
+
+async def test_numpy_outputs_are_stored_as_python_values(sim_runtime) -> None:
+    runtime = sim_runtime(
+        f"""
+        version: 1
+        tags:
+          label: {{type: uint16}}
+          flag: {{type: bool}}
+          level: {{type: float64}}
+        tasks:
+          fast:
+            interval: 10ms
+            programs:
+              - {{name: np, program: "{CORE}:NumpyWriter", bind: {{label: label, flag: flag, level: level}}}}
+        """
+    )
+    await runtime.run(duration=0.05)
+    assert runtime.program("np").state.value == "RUNNING", runtime.program("np").error
+    values = [runtime.db.value(name) for name in ("label", "flag", "level")]
+    assert values == [1, True, 0.25] and [type(v) for v in values] == [int, bool, float]

@@ -1,0 +1,141 @@
+"""Clocks: the discrete-event SimClock (order, speed), RealClock guarantees, clock helpers."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+
+import pytest
+
+from softplc.clock import RealClock, SimClock, wait_for
+
+
+async def driven(clock: SimClock) -> asyncio.Task[None]:
+    return asyncio.create_task(clock.drive())
+
+
+async def test_sim_clock_wakes_in_deadline_order_ties_in_request_order() -> None:
+    clock = SimClock()
+    driver = await driven(clock)
+    woken: list[tuple[float, str]] = []
+
+    async def sleeper(name: str, deadline: float) -> None:
+        await clock.sleep_until(deadline)
+        woken.append((clock.now(), name))
+
+    await asyncio.gather(
+        sleeper("c", 3.0), sleeper("a", 1.0), sleeper("tie1", 2.0), sleeper("tie2", 2.0), sleeper("b", 1.5)
+    )
+    driver.cancel()
+    assert woken == [(1.0, "a"), (1.5, "b"), (2.0, "tie1"), (2.0, "tie2"), (3.0, "c")]
+
+
+async def test_sim_time_stands_still_while_work_is_ready_and_never_runs_backwards() -> None:
+    clock = SimClock()
+    driver = await driven(clock)
+    await clock.sleep(5.0)
+    assert clock.now() == 5.0
+    for _ in range(100):  # busy work without waiting on the clock: time does not move
+        await asyncio.sleep(0)
+    assert clock.now() == 5.0
+    await clock.sleep_until(1.0)  # a deadline in the past returns at once, at the present
+    assert clock.now() == 5.0
+    assert clock.wall() - clock.now() == pytest.approx(1_767_225_600.0)  # a fixed epoch: reproducible
+    driver.cancel()
+
+
+async def test_cancelled_sleepers_do_not_hold_time_back() -> None:
+    clock = SimClock()
+    driver = await driven(clock)
+    early = asyncio.create_task(clock.sleep_until(1.0))
+    await asyncio.sleep(0)
+    early.cancel()
+    await clock.sleep_until(2.0)
+    assert clock.now() == 2.0
+    driver.cancel()
+
+
+async def test_drive_until_stops_at_the_limit() -> None:
+    clock = SimClock()
+    sleeper = asyncio.create_task(clock.sleep_until(10.0))
+    await clock.drive(until=4.0)
+    assert clock.now() == 4.0 and not sleeper.done()
+    sleeper.cancel()
+
+
+async def test_sim_clock_with_speed_runs_about_n_times_real_time() -> None:
+    """Bounded check, not a timing goal: never faster than speed N, not grossly slower."""
+    clock = SimClock(speed=20)
+    driver = await driven(clock)
+    started = time.monotonic()
+    for k in range(1, 41):  # 2 simulated seconds in 50 ms steps
+        await clock.sleep_until(k * 0.05)
+    wall = time.monotonic() - started
+    driver.cancel()
+    assert clock.now() == 2.0
+    assert wall >= 2.0 / 20 * 0.95  # a deadline is never released before its real-time moment
+    assert wall < 2.0 / 20 + 2.0
+
+
+async def test_sim_clock_with_speed_notices_an_earlier_new_sleeper() -> None:
+    clock = SimClock(speed=1.0)
+    driver = await driven(clock)
+    far = asyncio.create_task(clock.sleep_until(30.0))  # would hold the driver for 30 real seconds
+    await asyncio.sleep(0.01)
+    started = time.monotonic()
+    await clock.sleep_until(0.1)
+    assert time.monotonic() - started < 5.0 and clock.now() == 0.1
+    far.cancel()
+    driver.cancel()
+
+
+def test_speed_must_be_positive() -> None:
+    with pytest.raises(ValueError):
+        SimClock(speed=0)
+
+
+async def test_run_blocking_inline_on_sim_and_in_a_thread_on_real_time() -> None:
+    sim = SimClock()
+    assert await sim.run_blocking(threading.get_ident) == threading.get_ident()
+    real = RealClock()
+    assert await real.run_blocking(threading.get_ident) != threading.get_ident()
+    # the loop stays free while blocking work runs in the executor
+    ticks = 0
+
+    async def ticker() -> None:
+        nonlocal ticks
+        while True:
+            ticks += 1
+            await asyncio.sleep(0.005)
+
+    task = asyncio.create_task(ticker())
+    await real.run_blocking(time.sleep, 0.1)
+    task.cancel()
+    assert ticks >= 3
+
+
+async def test_real_clock_never_wakes_before_the_deadline() -> None:
+    clock = RealClock()
+    for offset in (0.0005, 0.002, 0.011):
+        deadline = clock.now() + offset
+        await clock.sleep_until(deadline)
+        assert clock.now() >= deadline
+    assert abs(clock.wall() - time.time()) < 0.5
+
+
+async def test_wait_for_measures_its_timeout_on_the_clock() -> None:
+    clock = SimClock()
+    driver = await driven(clock)
+    never = asyncio.get_running_loop().create_future()
+    with pytest.raises(TimeoutError):
+        await wait_for(clock, never, 60.0)  # a simulated minute: no real waiting
+    assert clock.now() == 60.0 and never.cancelled()
+
+    async def answer() -> int:
+        await clock.sleep(1.0)
+        return 42
+
+    assert await wait_for(clock, answer(), 5.0) == 42
+    assert clock.now() == 61.0
+    driver.cancel()

@@ -1,0 +1,148 @@
+"""Tag types and the tag database: coercion, validation rules, the journal, notifications."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from softplc.datatypes import DataType, TypeMismatch
+from softplc.tagdb import Rule, TagDatabase, WriteRejected
+from softplc.tags import Access, Quality, TagDef
+
+
+@pytest.mark.parametrize(
+    ("data_type", "value", "expected"),
+    [
+        (DataType.BOOL, True, True),
+        (DataType.BOOL, 0, False),
+        (DataType.BOOL, 1, True),
+        (DataType.INT16, -32768, -32768),
+        (DataType.INT16, 3.0, 3),
+        (DataType.UINT16, 65535, 65535),
+        (DataType.INT32, 2**31 - 1, 2**31 - 1),
+        (DataType.UINT32, 2**32 - 1, 2**32 - 1),
+        (DataType.FLOAT64, 3, 3.0),
+        (DataType.FLOAT64, math.inf, math.inf),
+        (DataType.FLOAT32, 0.1, 0.10000000149011612),
+        (DataType.STRING, "héllo", "héllo"),
+        # NumPy scalars (what scikit-learn returns) become plain Python values
+        (DataType.INT16, np.int64(7), 7),
+        (DataType.BOOL, np.bool_(True), True),
+        (DataType.FLOAT64, np.float32(0.5), 0.5),
+        (DataType.UINT16, np.float64(4.0), 4),
+    ],
+)
+def test_coerce_accepts_lossless_values(data_type: DataType, value: object, expected: object) -> None:
+    result = data_type.coerce(value)
+    assert result == expected and type(result) is type(expected)
+
+
+@pytest.mark.parametrize(
+    ("data_type", "value", "message"),
+    [
+        (DataType.BOOL, 2, "expected bool, got int 2"),
+        (DataType.BOOL, "true", "expected bool, got str 'true'"),
+        (DataType.INT16, 32768, "32768 does not fit in int16 (-32768..32767)"),
+        (DataType.UINT16, -1, "-1 does not fit in uint16 (0..65535)"),
+        (DataType.UINT32, 2**32, "4294967296 does not fit in uint32 (0..4294967295)"),
+        (DataType.INT32, 2.5, "expected int32, got non-integral number 2.5"),
+        (DataType.INT32, True, "expected int32, got bool True"),
+        (DataType.FLOAT64, "1.5", "expected float64, got str '1.5'"),
+        (DataType.FLOAT32, 1e39, "1e+39 does not fit in float32"),
+        (DataType.STRING, 5, "expected string, got int 5"),
+        (DataType.INT16, np.int64(40000), "40000 does not fit in int16 (-32768..32767)"),
+    ],
+)
+def test_coerce_rejects_lossy_values(data_type: DataType, value: object, message: str) -> None:
+    with pytest.raises(TypeMismatch) as raised:
+        data_type.coerce(value)
+    assert str(raised.value) == message
+
+
+def make_db() -> TagDatabase:
+    now = [100.0]
+    db = TagDatabase(
+        [
+            TagDef("level", DataType.FLOAT32, 0.0, min=0, max=100),
+            TagDef("count", DataType.UINT16, 5),
+            TagDef("status", DataType.STRING, "", access=Access.RO),
+            TagDef("run", DataType.BOOL, False),
+        ],
+        lambda: now[0],
+    )
+    db.test_now = now  # type: ignore[attr-defined]
+    return db
+
+
+def test_validate_applies_every_rule() -> None:
+    db = make_db()
+    assert db.validate("level", 50) == 50.0
+    cases = [
+        ("nope", 1, True, Rule.UNKNOWN_TAG, "nope: unknown tag: no such tag"),
+        ("status", "x", True, Rule.READ_ONLY, "status: read-only: the tag is read-only for clients"),
+        ("count", 1.5, True, Rule.TYPE_MISMATCH, "count: type mismatch: expected uint16, got non-integral number 1.5"),
+        ("level", 100.5, True, Rule.OUT_OF_RANGE, "level: out of range: 100.5 is above the maximum 100"),
+        ("level", -1, True, Rule.OUT_OF_RANGE, "level: out of range: -1.0 is below the minimum 0"),
+    ]
+    for name, value, client, rule, message in cases:
+        with pytest.raises(WriteRejected) as raised:
+            db.validate(name, value, client=client)
+        assert (raised.value.tag, raised.value.rule, str(raised.value)) == (name, rule, message)
+    assert db.validate("status", "ok", client=False) == "ok"  # programs may write ro tags
+
+
+def test_submit_journals_valid_items_and_applies_them_together_in_order() -> None:
+    db = make_db()
+    changes: list[list[str]] = []
+    unsubscribe = db.on_change(lambda tags: changes.append([f"{t.name}={t.value}" for t in tags]))
+    results = db.submit([("level", 10), ("count", -1), ("level", 20), ("run", 1)], "client")
+    assert [r is None for r in results] == [True, False, True, True]
+    assert db.value("level") == 0.0 and changes == []
+    db.test_now[0] = 101.0  # type: ignore[attr-defined]
+    assert db.apply_journal() == 3
+    assert db.value("level") == 20.0 and db["level"].timestamp == 101.0 and db.value("run") is True
+    assert changes == [["level=20.0", "run=True"]]  # one notification per applied batch
+    assert db.apply_journal() == 0
+    db.submit([("level", 20)], "client")  # unchanged: applied, nobody notified
+    db.apply_journal()
+    assert len(changes) == 1
+    unsubscribe()
+    db.submit([("level", 30)], "client")
+    db.apply_journal()
+    assert len(changes) == 1 and db.value("level") == 30.0
+
+
+def test_commit_notifies_only_changes_and_restores_good_quality() -> None:
+    db = make_db()
+    seen: list[str] = []
+    db.on_change(lambda tags: seen.extend(t.name for t in tags))
+    db.submit_quality(["count"], Quality.BAD, "driver")
+    db.apply_journal()
+    assert db["count"].quality is Quality.BAD and seen == ["count"]
+    changed = db.commit({"count": 5, "level": 0.0})  # same value but BAD → GOOD is a change
+    assert [t.name for t in changed] == ["count"] and db["count"].quality is Quality.GOOD
+
+
+def test_a_failing_subscriber_does_not_stop_the_others(caplog) -> None:
+    db = make_db()
+    seen: list[str] = []
+
+    def broken(tags: object) -> None:
+        raise RuntimeError("subscriber bug")
+
+    db.on_change(broken)
+    db.on_change(lambda tags: seen.extend(t.name for t in tags))
+    db.commit({"count": 6})
+    assert seen == ["count"] and db.value("count") == 6
+    assert "subscriber bug" in caplog.text
+
+
+def test_snapshot_and_duplicates() -> None:
+    db = make_db()
+    assert db.snapshot(["count", "run"]) == {"count": 5, "run": False}
+    assert set(db.snapshot()) == {"level", "count", "status", "run"}
+    assert len(db) == 4 and "level" in db and db.get("nope") is None
+    with pytest.raises(ValueError):
+        TagDatabase([TagDef("a", DataType.BOOL, False), TagDef("a", DataType.BOOL, False)], lambda: 0.0)
