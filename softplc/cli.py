@@ -31,7 +31,7 @@ EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
 DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules that add subcommands (each defines add_commands(subparsers)).
-COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.opcua.cli")
+COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.opcua.cli", "softplc.latency.command")
 
 log = logging.getLogger("softplc")
 
