@@ -251,26 +251,6 @@ class SecuredChannels:
         return der in self._seen
 
 
-class TrackingPolicyFactory:
-    """Wraps asyncua's SecurityPolicyFactory to note the certificate of every secured channel."""
-
-    def __init__(self, inner: object, secured: SecuredChannels, is_secure: bool) -> None:
-        self._inner = inner
-        self._secured = secured
-        self._is_secure = is_secure
-
-    def matches(self, uri: str, mode: ua.MessageSecurityMode | None = None) -> bool:
-        return self._inner.matches(uri, mode)  # type: ignore[attr-defined]
-
-    def create(self, peer_certificate: bytes | None) -> object:
-        if self._is_secure:
-            self._secured.add(peer_certificate)
-        return self._inner.create(peer_certificate)  # type: ignore[attr-defined]
-
-    def __getattr__(self, name: str) -> object:
-        return getattr(self._inner, name)
-
-
 def _uris(certificate: x509.Certificate) -> list[str]:
     try:
         san = certificate.extensions.get_extension_for_class(x509.SubjectAlternativeName)

@@ -22,18 +22,18 @@ import gc
 import logging
 import time
 from datetime import datetime, timezone
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 from urllib.parse import urlparse
 
 from asyncua import Server, ua
-from asyncua.crypto.security_policies import SecurityPolicyNone
 
 from softplc import __version__
 from softplc.opcua.address_space import AddressSpaceBuilder, plan_folders, tag_node_id
 from softplc.opcua.publisher import Publisher
 from softplc.opcua.roles import RolePermissions
-from softplc.opcua.security import ClientCertificateValidator, Pki, SecuredChannels, TrackingPolicyFactory
+from softplc.opcua.security import ClientCertificateValidator, Pki, SecuredChannels
 from softplc.opcua.settings import POLICIES, POLICY_NONE, POLICY_TEXT, OpcUaSettings
+from softplc.opcua.transport import GuardedServer
 from softplc.opcua.users import SoftplcUserManager, UserStore
 from softplc.opcua.writes import TagAttributeService
 from softplc.yamlsource import ConfigError
@@ -81,7 +81,12 @@ class OpcUaServer:
         except ConfigError as error:
             raise AdapterError(f"OPC UA users file is invalid:\n{error}") from None
         self.pki = Pki(settings.pki_path(runtime.state_dir))
-        server = Server(user_manager=SoftplcUserManager(self.users, settings.anonymous_role))
+        self._secured_channels = SecuredChannels()
+        server = GuardedServer(
+            user_manager=SoftplcUserManager(self.users, settings.anonymous_role),
+            secured=self._secured_channels,
+            offer_none=POLICY_NONE in settings.policies,
+        )
         self.server = server
         server.name = f"softplc {runtime.config.name}"
         server.product_uri = "urn:softplc"
@@ -93,7 +98,10 @@ class OpcUaServer:
         server.disable_clock(True)
         iserver = server.iserver
         iserver.allow_remote_admin = False
-        iserver.max_pending_activation_seconds = 10.0
+        iserver.max_pending_activation_seconds = 10.0  # a connection that never logs in is closed
+        # A session whose client vanished keeps its subscriptions (fed by every scan) until it
+        # times out; clients keep sessions alive anyway, so a minute is plenty.
+        iserver.max_session_timeout_ms = 60_000
         await server.init()
         await server.set_application_uri(settings.application_uri)
         await server.set_build_info("urn:softplc", "softplc", "softplc", __version__, __version__, datetime.now(timezone.utc))
@@ -154,7 +162,6 @@ class OpcUaServer:
         if settings.secured:
             tokens.append(ua.X509IdentityToken)
         server.set_identity_tokens(tokens)
-        self._secured_channels = SecuredChannels()
         server.iserver.certificate_validator = ClientCertificateValidator(
             self.pki, self._secured_channels, all_secured=POLICY_NONE not in settings.policies
         )
@@ -184,13 +191,9 @@ class OpcUaServer:
         iserver.attribute_service = self.writes
 
     def _after_listen(self, server: Server) -> None:
-        # Note the certificates of secured channels (see ClientCertificateValidator); done
-        # before the loop runs again, so no channel opens unnoticed.
-        policies: list[Any] = server._policies  # the list every connection reads its policies from
-        for index, factory in enumerate(policies):
-            policies[index] = TrackingPolicyFactory(factory, self._secured_channels, factory.cls is not SecurityPolicyNone)
         host, port, path = self.settings.parsed_endpoint()
         if server.bserver is not None and port == 0:
+            # Asked for any free port: advertise the one we got.
             port = server.bserver.port
             self.endpoint = f"opc.tcp://{host}:{port}{path}"
             server.endpoint = urlparse(self.endpoint)
