@@ -62,6 +62,9 @@ class Table(enum.Enum):
         return {Table.COIL: "coils", Table.DISCRETE_INPUT: "discrete inputs", Table.HOLDING: "holding registers", Table.INPUT: "input registers"}[self]
 
 
+_TABLE_NAMES = frozenset(table.value for table in Table)
+
+
 @dataclass(frozen=True, slots=True)
 class Mapping:
     """One tag's place in the map."""
@@ -144,6 +147,17 @@ class AddressMap:
             mapping = mappings[index]
             result.append(mapping)
             current = mapping.end
+        return result
+
+    def indices(self, table: Table, start: int, end: int) -> list[int]:
+        """Indices (into `mappings`) of the mappings with any address in [start, end), in address order."""
+        owner = self._owner[table]
+        result: list[int] = []
+        previous = -1
+        for index in owner[max(0, start) : min(end, len(owner))]:
+            if index >= 0 and index != previous:
+                result.append(index)
+                previous = index
         return result
 
     def runs(self, table: Table) -> list[tuple[int, int]]:
@@ -254,7 +268,7 @@ class _Builder:
         options = tag.options.get("modbus") or {}
         if not isinstance(options, dict) or options.get("enabled", True) is False:
             return None
-        table = Table(options["table"]) if options.get("table") in {t.value for t in Table} else _default_table(tag)
+        table = Table(options["table"]) if options.get("table") in _TABLE_NAMES else _default_table(tag)
         pinned = isinstance(options.get("address"), int)
         if pinned:
             path = self.paths.get(tag.name, ())
