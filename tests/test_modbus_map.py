@@ -253,3 +253,16 @@ def test_modbus_map_cli_reports_config_errors_with_location(tmp_path, capsys):
     assert main(["modbus-map", str(path)]) == 2
     err = capsys.readouterr().err
     assert f"{path}:4:38: 'b' (holding registers 5) overlaps 'a'" in err
+
+
+def test_an_overlap_hidden_behind_a_short_tag_is_found(make_config):
+    problems = expect_problems(make_config, """
+        version: 1
+        tags:
+          wide:  {type: float64, modbus: {address: 100}}
+          small: {type: int16, modbus: {address: 101}}
+          other: {type: int16, modbus: {address: 102}}
+    """)
+    assert len(problems) == 2
+    assert "'small' (holding registers 101) overlaps 'wide'" in problems[0]
+    assert "'other' (holding registers 102) overlaps 'wide'" in problems[1]

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import enum
 from array import array
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -336,21 +336,26 @@ class _Builder:
         codec = RegisterCodec(data_type, register_type, register_words(register_type), float(scale) if scale is not None else None, word_order)
         return Mapping(tag, table, address, codec.words, codec, pinned)
 
-    def _check_overlaps(self, mappings: Iterable[Mapping]) -> None:
+    def _check_overlaps(self, mappings: Sequence[Mapping]) -> None:
+        declared = {mapping.name: index for index, mapping in enumerate(mappings)}
         for table in Table:
-            ordered = sorted((m for m in mappings if m.table is table), key=lambda m: (m.address, not m.pinned))
+            ordered = sorted((m for m in mappings if m.table is table), key=lambda m: m.address)
             reported: set[str] = set()
-            for previous, current in zip(ordered, ordered[1:]):
-                if current.address >= previous.end:
-                    continue
-                # Report on a pinned tag (the user's explicit choice) rather than an automatic one.
-                culprit, other = (current, previous) if current.pinned or not previous.pinned else (previous, current)
-                if culprit.name in reported:
-                    continue
-                reported.add(culprit.name)
-                self.problem(culprit.tag, "address" if culprit.pinned else None,
-                    f"'{culprit.name}' ({table.plural} {_span(culprit)}) overlaps '{other.name}' "
-                    f"({table.plural} {_span(other)}, {self.where(other)})")
+            reach: Mapping | None = None  # of the mappings so far, the one ending furthest
+            for current in ordered:
+                if reach is not None and current.address < reach.end:
+                    # Blame a pinned tag (the user's explicit choice) over a packed one, else the later one.
+                    if current.pinned != reach.pinned:
+                        culprit, other = (current, reach) if current.pinned else (reach, current)
+                    else:
+                        culprit, other = sorted((current, reach), key=lambda m: declared[m.name], reverse=True)
+                    if culprit.name not in reported:
+                        reported.add(culprit.name)
+                        self.problem(culprit.tag, "address" if culprit.pinned else None,
+                            f"'{culprit.name}' ({table.plural} {_span(culprit)}) overlaps '{other.name}' "
+                            f"({table.plural} {_span(other)}, {self.where(other)})")
+                if reach is None or current.end > reach.end:
+                    reach = current
 
 
 def _span(mapping: Mapping) -> str:

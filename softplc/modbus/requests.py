@@ -66,7 +66,7 @@ class RequestGuard:
                 log.debug("modbus: request for unit id %d, this server is unit %d", device_id, self.unit_id)
             return ExcCodes.GATEWAY_NO_RESPONSE
         table, limit = LIMITS[function_code]
-        for index, (address, count) in enumerate(ranges):
+        for index, (_, count) in enumerate(ranges):
             # FC23's write part may carry at most 121 registers.
             maximum = 121 if function_code == 23 and index == 1 else limit
             if not 1 <= count <= maximum:
