@@ -74,13 +74,13 @@ class ModbusAdapter:
         missing = [mapping.name for mapping in self.map.mappings if mapping.name not in db]
         if missing:
             raise AdapterError(f"Modbus map names tags the runtime does not have: {', '.join(missing[:5])}")
+        settings = self.settings
+        _probe_port(settings.host, settings.port)
         self._db = db
         self._image = RegisterImage(self.map, db)
         self._unsubscribe = db.on_change(self._image.note_changed)
-        settings = self.settings
         device = SimDevice(settings.unit_id, simdata=self._simdata(), action=self._action)
         guard = RequestGuard(self.map, settings.unit_id)
-        _probe_port(settings.host, settings.port)
         server = ModbusTcpServer(device, address=(settings.host, settings.port), custom_pdu=guarded_requests(guard))
         try:
             await server.serve_forever(background=True)
