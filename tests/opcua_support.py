@@ -130,10 +130,11 @@ async def wait_until(condition: Callable[[], Awaitable[bool] | bool], timeout: f
 
 @dataclass
 class ClientCertificate:
-    certificate: Path
-    key: Path
+    certificate: Path  # DER
+    key: Path  # PEM
     uri: str
     der: bytes
+    pem: Path  # the certificate again, as PEM
 
 
 def make_client_certificate(directory: Path, name: str = "test-client") -> ClientCertificate:
@@ -145,10 +146,11 @@ def make_client_certificate(directory: Path, name: str = "test-client") -> Clien
         extended=[ExtendedKeyUsageOID.CLIENT_AUTH], days=30,
     )
     der = certificate.public_bytes(serialization.Encoding.DER)
-    cert_path, key_path = directory / f"{name}.der", directory / f"{name}.pem"
+    cert_path, key_path, pem_path = directory / f"{name}.der", directory / f"{name}.key.pem", directory / f"{name}.cert.pem"
     cert_path.write_bytes(der)
     key_path.write_bytes(dump_private_key_as_pem(key))
-    return ClientCertificate(cert_path, key_path, uri, der)
+    pem_path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
+    return ClientCertificate(cert_path, key_path, uri, der, pem_path)
 
 
 def node(client: Client, ns: int, tag: str) -> Any:

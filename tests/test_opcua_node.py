@@ -1,0 +1,75 @@
+"""An independent client none of us wrote (node-opcua, npm) browses, reads, writes and subscribes.
+
+Needs `node` and tests/node/node_modules (scripts/install-test-tools.sh runs `npm install` there).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import shutil
+
+import pytest
+
+from tests.conftest import REPO
+from softplc.opcua import Pki
+from softplc.opcua.security import fingerprint
+from tests.opcua_support import PASSWORDS, make_client_certificate, running_plant
+
+NODE_DIR = REPO / "tests" / "node"
+
+
+def _require_node_opcua() -> str:
+    node = shutil.which("node")
+    if node is None:
+        pytest.fail("node is not installed: run scripts/install-test-tools.sh (needs Node.js and npm)")
+    if not (NODE_DIR / "node_modules" / "node-opcua-client").is_dir():
+        pytest.fail("node-opcua-client is not installed: run scripts/install-test-tools.sh (npm install in tests/node)")
+    return node
+
+
+async def _run(node: str, *arguments: str) -> tuple[int, dict | None, str]:
+    process = await asyncio.create_subprocess_exec(
+        node, "opcua_check.js", *arguments, cwd=NODE_DIR, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )
+    stdout, stderr = await asyncio.wait_for(process.communicate(), 60)
+    results = [line[len("RESULT "):] for line in stdout.decode().splitlines() if line.startswith("RESULT ")]
+    return process.returncode or 0, (json.loads(results[0]) if results else None), (stderr + stdout).decode()[-3000:]
+
+
+def _check(seen: dict, runtime, server) -> None:
+    assert seen["namespaceIndex"] == server.namespace_index
+    assert any(name.endswith("Plant") for name in seen["objects"]) and any(name.endswith("Diagnostics") for name in seen["objects"])
+    assert seen["plant"][0] == "Robots" and "s1" in seen["plant"]
+    assert seen["s1"] == "hello"
+    assert seen["i16DataType"] == "ns=0;i=4"  # Int16
+    assert (seen["roAccessLevel"], seen["rwAccessLevel"]) == (1, 3)
+    assert seen["i16Range"] == {"low": -100, "high": 100}
+    assert seen["writes"] == ["Good", "BadNotWritable", "BadOutOfRange", "BadTypeMismatch", "Good"]
+    counts = seen["counts"]
+    assert len(counts) >= 10 and counts == sorted(counts)
+    assert runtime.db.value("i32") == 4321 and runtime.db.value("f32") == 2.5
+    assert runtime.db.value("ro_i32") == 7 and runtime.db.value("i16") == 0
+
+
+async def test_node_opcua_client_browses_reads_writes_and_subscribes(tmp_path) -> None:
+    node = _require_node_opcua()
+    async with running_plant(tmp_path, security=("None",)) as (runtime, server):
+        code, seen, output = await _run(node, server.endpoint, "operator", PASSWORDS["operator"])
+        assert code == 0 and seen is not None, output
+        _check(seen, runtime, server)
+
+
+async def test_node_opcua_over_sign_and_encrypt_after_its_certificate_is_trusted(tmp_path) -> None:
+    node = _require_node_opcua()
+    certificate = make_client_certificate(tmp_path, "node-opcua-client")
+    secure = ("SignAndEncrypt", str(certificate.pem), str(certificate.key), certificate.uri)
+    async with running_plant(tmp_path, security=("Basic256Sha256_SignAndEncrypt",), anonymous="off") as (runtime, server):
+        code, seen, output = await _run(node, server.endpoint, "operator", PASSWORDS["operator"], *secure)
+        assert code != 0 and seen is None, "an untrusted node-opcua client got in"
+        pki = Pki(tmp_path / "state" / "pki")
+        assert [info.fingerprint for info in pki.list(pki.rejected_dir)] == [fingerprint(certificate.der)]
+        pki.trust(fingerprint(certificate.der)[:16])
+        code, seen, output = await _run(node, server.endpoint, "operator", PASSWORDS["operator"], *secure)
+        assert code == 0 and seen is not None, output
+        _check(seen, runtime, server)
