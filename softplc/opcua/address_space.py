@@ -22,6 +22,7 @@ import math
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 from datetime import datetime, timezone
 
 from asyncua import ua
@@ -44,6 +45,8 @@ _BASE_VARIABLE_TYPE = ua.NodeId(ua.ObjectIds.BaseDataVariableType)
 _ANALOG_ITEM_TYPE = ua.NodeId(ua.ObjectIds.AnalogItemType)
 _BASE_ANALOG_TYPE = ua.NodeId(ua.ObjectIds.BaseAnalogType)
 _OBJECTS_FOLDER = ua.NodeId(ua.ObjectIds.ObjectsFolder)
+_RANGE = ua.NodeId(ua.ObjectIds.Range)
+_EU_INFORMATION = ua.NodeId(ua.ObjectIds.EUInformation)
 
 _BUILD_SLICE = 0.005
 READ = 1  # AccessLevel bit CurrentRead
@@ -115,18 +118,19 @@ class AddressSpaceBuilder:
         self.ns = namespace_index
         self.values: dict[str, AttributeValue] = {}  # tag name → its Value attribute
         self.node_count = 0
-        # Shared, never-mutated DataValues for attributes every node has alike.
-        self._zero_mask = ua.DataValue(ua.Variant(0, ua.VariantType.UInt32))
-        self._scalar = ua.DataValue(ua.Variant(-1, ua.VariantType.Int32))
-        self._no_history = ua.DataValue(ua.Variant(False, ua.VariantType.Boolean))
-        self._sampling = ua.DataValue(ua.Variant(0.0, ua.VariantType.Double))
-        self._access = {
-            level: ua.DataValue(ua.Variant(level, ua.VariantType.Byte)) for level in (READ, READ_WRITE)
-        }
-        self._variable_class = ua.DataValue(ua.Variant(ua.NodeClass.Variable, ua.VariantType.Int32))
-        self._object_class = ua.DataValue(ua.Variant(ua.NodeClass.Object, ua.VariantType.Int32))
-        self._no_events = ua.DataValue(ua.Variant(0, ua.VariantType.Byte))
         self._built = datetime.now(timezone.utc)
+        # Attributes that are alike on many nodes and never written (our Write service refuses
+        # every attribute but Value) are one shared object: a third fewer objects to build.
+        self._static: dict[Any, AttributeValue] = {}
+        self._data_types: dict[ua.NodeId, AttributeValue] = {}
+        self._descriptions: dict[str, AttributeValue] = {}
+
+    def _shared(self, value: Any, variant_type: ua.VariantType) -> AttributeValue:
+        key = (value, variant_type)
+        attribute = self._static.get(key)
+        if attribute is None:
+            attribute = self._static[key] = AttributeValue(ua.DataValue(ua.Variant(value, variant_type)))
+        return attribute
 
     async def build(self, roots: Sequence[_Folder], tags: dict[str, Tag]) -> None:
         """Add every folder and tag under Objects (a root folder with no children is left out).
@@ -154,20 +158,45 @@ class AddressSpaceBuilder:
 
     # -- nodes ----------------------------------------------------------------------------
 
-    def _base_node(self, node_id: ua.NodeId, name: str, description: str, node_class: ua.DataValue, browse_ns: int | None = None) -> NodeData:
+    def _description(self, text: str) -> AttributeValue:
+        attribute = self._descriptions.get(text)
+        if attribute is None:
+            attribute = AttributeValue(ua.DataValue(ua.Variant(ua.LocalizedText(text), ua.VariantType.LocalizedText)))
+            if len(self._descriptions) < 10_000:
+                self._descriptions[text] = attribute
+        return attribute
+
+    def _base_node(self, node_id: ua.NodeId, name: str, description: str, node_class: ua.NodeClass, browse_ns: int | None = None) -> NodeData:
         node = NodeData(node_id)
-        attributes = node.attributes
         qualified = ua.QualifiedName(name, self.ns if browse_ns is None else browse_ns)
-        attributes[ua.AttributeIds.NodeId] = AttributeValue(ua.DataValue(ua.Variant(node_id, ua.VariantType.NodeId)))
-        attributes[ua.AttributeIds.BrowseName] = AttributeValue(ua.DataValue(ua.Variant(qualified, ua.VariantType.QualifiedName)))
-        attributes[ua.AttributeIds.NodeClass] = AttributeValue(node_class)
-        attributes[ua.AttributeIds.DisplayName] = AttributeValue(ua.DataValue(ua.Variant(ua.LocalizedText(name), ua.VariantType.LocalizedText)))
-        attributes[ua.AttributeIds.Description] = AttributeValue(ua.DataValue(ua.Variant(ua.LocalizedText(description), ua.VariantType.LocalizedText)))
-        attributes[ua.AttributeIds.WriteMask] = AttributeValue(self._zero_mask)
-        attributes[ua.AttributeIds.UserWriteMask] = AttributeValue(self._zero_mask)
+        zero_mask = self._shared(0, ua.VariantType.UInt32)
+        node.attributes = {
+            ua.AttributeIds.NodeId: AttributeValue(ua.DataValue(ua.Variant(node_id, ua.VariantType.NodeId))),
+            ua.AttributeIds.BrowseName: AttributeValue(ua.DataValue(ua.Variant(qualified, ua.VariantType.QualifiedName))),
+            ua.AttributeIds.NodeClass: self._shared(node_class, ua.VariantType.Int32),
+            ua.AttributeIds.DisplayName: AttributeValue(ua.DataValue(ua.Variant(ua.LocalizedText(name), ua.VariantType.LocalizedText))),
+            ua.AttributeIds.Description: self._description(description),
+            ua.AttributeIds.WriteMask: zero_mask,
+            ua.AttributeIds.UserWriteMask: zero_mask,
+        }
         self.aspace[node_id] = node
         self.node_count += 1
         return node
+
+    def _variable_attributes(self, node: NodeData, value: AttributeValue, data_type: ua.NodeId, access: int) -> None:
+        data_type_attribute = self._data_types.get(data_type)
+        if data_type_attribute is None:
+            data_type_attribute = self._data_types[data_type] = AttributeValue(ua.DataValue(ua.Variant(data_type, ua.VariantType.NodeId)))
+        access_attribute = self._shared(access, ua.VariantType.Byte)
+        node.attributes.update({
+            ua.AttributeIds.Value: value,
+            ua.AttributeIds.DataType: data_type_attribute,
+            ua.AttributeIds.ValueRank: self._shared(-1, ua.VariantType.Int32),
+            ua.AttributeIds.AccessLevel: access_attribute,
+            ua.AttributeIds.UserAccessLevel: access_attribute,
+            ua.AttributeIds.MinimumSamplingInterval: self._shared(0.0, ua.VariantType.Double),
+            ua.AttributeIds.Historizing: self._shared(False, ua.VariantType.Boolean),
+        })
 
     def _link(self, parent: NodeData, child: NodeData, reference: ua.NodeId, node_class: ua.NodeClass, type_definition: ua.NodeId) -> None:
         """Forward reference parent → child, inverse child → parent, and the child's type."""
@@ -190,45 +219,29 @@ class AddressSpaceBuilder:
         ))
 
     def _add_folder(self, folder: _Folder, parent: NodeData) -> None:
-        node = self._base_node(ua.NodeId(folder.path, self.ns), folder.name, "", self._object_class)
-        node.attributes[ua.AttributeIds.EventNotifier] = AttributeValue(self._no_events)
+        node = self._base_node(ua.NodeId(folder.path, self.ns), folder.name, "", ua.NodeClass.Object)
+        node.attributes[ua.AttributeIds.EventNotifier] = self._shared(0, ua.VariantType.Byte)
         self._link(parent, node, _ORGANIZES, ua.NodeClass.Object, _FOLDER_TYPE)
 
     def _add_variable(self, definition: TagDef, parent: NodeData, tag: Tag) -> None:
-        node_id = ua.NodeId(definition.name, self.ns)
-        node = self._base_node(node_id, definition.name, definition.description, self._variable_class)
-        access = self._access[READ_WRITE if definition.access is Access.RW else READ]
-        attributes = node.attributes
+        node = self._base_node(ua.NodeId(definition.name, self.ns), definition.name, definition.description, ua.NodeClass.Variable)
         value = AttributeValue(data_value(definition, tag.value, tag.quality, tag.timestamp))
-        attributes[ua.AttributeIds.Value] = value
-        attributes[ua.AttributeIds.DataType] = AttributeValue(ua.DataValue(ua.Variant(DATA_TYPE_IDS[definition.type], ua.VariantType.NodeId)))
-        attributes[ua.AttributeIds.ValueRank] = AttributeValue(self._scalar)
-        attributes[ua.AttributeIds.AccessLevel] = AttributeValue(access)
-        attributes[ua.AttributeIds.UserAccessLevel] = AttributeValue(access)
-        attributes[ua.AttributeIds.MinimumSamplingInterval] = AttributeValue(self._sampling)
-        attributes[ua.AttributeIds.Historizing] = AttributeValue(self._no_history)
-        has_range = definition.type.is_numeric and (definition.min is not None or definition.max is not None)
+        self._variable_attributes(node, value, DATA_TYPE_IDS[definition.type], READ_WRITE if definition.access is Access.RW else READ)
+        numeric = definition.type.is_numeric
+        has_range = numeric and (definition.min is not None or definition.max is not None)
         has_unit = bool(definition.unit)
-        type_definition = _ANALOG_ITEM_TYPE if has_range else _BASE_ANALOG_TYPE if has_unit and definition.type.is_numeric else _BASE_VARIABLE_TYPE
+        type_definition = _ANALOG_ITEM_TYPE if has_range else _BASE_ANALOG_TYPE if has_unit and numeric else _BASE_VARIABLE_TYPE
         self._link(parent, node, _ORGANIZES, ua.NodeClass.Variable, type_definition)
         self.values[definition.name] = value
         if has_range:
-            self._add_property(node, definition.name, "EURange", ua.Variant(eu_range(definition), ua.VariantType.ExtensionObject), ua.NodeId(ua.ObjectIds.Range))
+            self._add_property(node, definition.name, "EURange", ua.Variant(eu_range(definition), ua.VariantType.ExtensionObject), _RANGE)
         if has_unit:
-            self._add_property(node, definition.name, "EngineeringUnits", ua.Variant(eu_information(definition.unit), ua.VariantType.ExtensionObject), ua.NodeId(ua.ObjectIds.EUInformation))
+            self._add_property(node, definition.name, "EngineeringUnits", ua.Variant(eu_information(definition.unit), ua.VariantType.ExtensionObject), _EU_INFORMATION)
 
     def _add_property(self, owner: NodeData, tag_name: str, name: str, value: ua.Variant, data_type: ua.NodeId) -> None:
-        node = self._base_node(ua.NodeId(f"{tag_name}/{name}", self.ns), name, "", self._variable_class, browse_ns=0)
-        attributes = node.attributes
-        attributes[ua.AttributeIds.Value] = AttributeValue(ua.DataValue(value, SourceTimestamp=self._built, ServerTimestamp=self._built))
-        attributes[ua.AttributeIds.DataType] = AttributeValue(ua.DataValue(ua.Variant(data_type, ua.VariantType.NodeId)))
-        attributes[ua.AttributeIds.ValueRank] = AttributeValue(self._scalar)
-        attributes[ua.AttributeIds.AccessLevel] = AttributeValue(self._access[READ])
-        attributes[ua.AttributeIds.UserAccessLevel] = AttributeValue(self._access[READ])
-        attributes[ua.AttributeIds.MinimumSamplingInterval] = AttributeValue(self._sampling)
-        attributes[ua.AttributeIds.Historizing] = AttributeValue(self._no_history)
+        node = self._base_node(ua.NodeId(f"{tag_name}/{name}", self.ns), name, "", ua.NodeClass.Variable, browse_ns=0)
+        self._variable_attributes(node, AttributeValue(ua.DataValue(value, SourceTimestamp=self._built, ServerTimestamp=self._built)), data_type, READ)
         self._link(owner, node, _HAS_PROPERTY, ua.NodeClass.Variable, _PROPERTY_TYPE)
-
 
 
 def eu_range(definition: TagDef) -> ua.Range:

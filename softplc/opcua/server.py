@@ -102,15 +102,18 @@ class OpcUaServer:
         # A session whose client vanished keeps its subscriptions (fed by every scan) until it
         # times out; clients keep sessions alive anyway, so a minute is plenty.
         iserver.max_session_timeout_ms = 60_000
-        await server.init()
-        await server.set_application_uri(settings.application_uri)
-        await server.set_build_info("urn:softplc", "softplc", "softplc", __version__, __version__, datetime.now(timezone.utc))
-        iserver.set_attribute_value_callback(
-            ua.NodeId(ua.ObjectIds.Server_ServerStatus_CurrentTime), ua.AttributeIds.Value, _current_time
-        )
-        self.namespace_index = await server.register_namespace(settings.namespace)
-        await self._configure_security(server)
-        await self._build_address_space(runtime)
+        # Loading asyncua's standard address space and building ours make ~100 objects a
+        # node; the collector's full passes over them meanwhile cost a third of the start-up.
+        collecting = gc.isenabled()
+        gc.disable()
+        try:
+            await self._build_server(server, runtime)
+        finally:
+            if collecting:
+                gc.enable()
+        # A full collection over a big address space pauses the loop for 0.3 s+; the nodes
+        # live as long as the server, so move everything so far out of the collector's sight.
+        gc.freeze()
         try:
             await server.start()
         except OSError as error:
@@ -122,6 +125,19 @@ class OpcUaServer:
         self.publisher.run()
         self.startup_seconds = time.perf_counter() - started
         log.info("OPC UA serving %d tags (%d nodes) on %s, ready in %.2f s", len(runtime.db), self.node_count, self.endpoint, self.startup_seconds)
+
+    async def _build_server(self, server: Server, runtime: Runtime) -> None:
+        settings = self.settings
+        iserver = server.iserver
+        await server.init()
+        await server.set_application_uri(settings.application_uri)
+        await server.set_build_info("urn:softplc", "softplc", "softplc", __version__, __version__, datetime.now(timezone.utc))
+        iserver.set_attribute_value_callback(
+            ua.NodeId(ua.ObjectIds.Server_ServerStatus_CurrentTime), ua.AttributeIds.Value, _current_time
+        )
+        self.namespace_index = await server.register_namespace(settings.namespace)
+        await self._configure_security(server)
+        await self._build_address_space(runtime)
 
     async def stop(self) -> None:
         if self.publisher is not None:
@@ -176,16 +192,7 @@ class OpcUaServer:
         self.publisher.start()  # listen first: a change made while we build is pushed after
         builder = AddressSpaceBuilder(iserver.aspace, ns)
         roots = plan_folders((tag.definition for tag in db), self.settings.folder_size)
-        collecting = gc.isenabled()
-        gc.disable()  # building makes ~30 objects a node; collections meanwhile are pure cost
-        try:
-            await builder.build(roots, {tag.name: tag for tag in db})
-        finally:
-            if collecting:
-                gc.enable()
-        # A full collection over a big address space pauses the loop for 0.3 s+; the nodes
-        # live as long as the server, so move everything so far out of the collector's sight.
-        gc.freeze()
+        await builder.build(roots, {tag.name: tag for tag in db})
         self.node_count = builder.node_count
         self.writes = TagAttributeService(iserver.aspace, db, ns)
         iserver.attribute_service = self.writes
