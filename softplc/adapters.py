@@ -18,8 +18,10 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("servers")
     group.add_argument("--no-servers", action="store_true", help="start no protocol server (scan only)")
     # Modbus TCP (softplc.modbus)
+    from softplc.modbus.settings import port_number as modbus_port
+
     group.add_argument("--modbus-host", metavar="HOST", help="Modbus TCP bind address (default servers.modbus.host, 127.0.0.1)")
-    group.add_argument("--modbus-port", type=int, metavar="PORT", help="Modbus TCP port (default servers.modbus.port, 5020; 0 = any free port)")
+    group.add_argument("--modbus-port", type=modbus_port, metavar="PORT", help="Modbus TCP port (default servers.modbus.port, 5020; 0 = any free port)")
     group.add_argument("--no-modbus", action="store_true", help="do not start the Modbus TCP server")
     # OPC UA (softplc.opcua)
     group.add_argument("--opcua-endpoint", metavar="URL", help="OPC UA endpoint, e.g. opc.tcp://0.0.0.0:4840/softplc/ (default servers.opcua.endpoint; port 0 = any free port)")
@@ -27,11 +29,15 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--opcua-anonymous", choices=("off", "viewer"), help="anonymous OPC UA sessions: refused, or read-only")
     group.add_argument("--opcua-users", type=Path, metavar="FILE", help="OPC UA users file (default servers.opcua.users_file, STATE_DIR/users.yaml)")
     group.add_argument("--no-opcua", action="store_true", help="do not start the OPC UA server")
+    # Robot fleet (softplc.fleet)
+    robots = parser.add_argument_group("robots")
+    robots.add_argument("--no-fleet", action="store_true", help="do not drive the robots of the fleet: section")
 
 
 def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) -> list[Adapter]:
     """The adapters to start for this plant, honouring command-line overrides in `args`."""
     adapters: list[Adapter] = []
+    adapters.extend(_fleet(config, args))  # robots are not servers: --no-servers keeps them
     if args is not None and getattr(args, "no_servers", False):
         return adapters
     adapters.extend(_opcua(config, args))
@@ -79,3 +85,15 @@ def _opcua(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter
     from softplc.opcua.server import OpcUaServer
 
     return [OpcUaServer(settings)]
+
+
+def _fleet(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    from softplc.fleet.settings import FleetSettings
+
+    if not FleetSettings.configured(config) or bool(getattr(args, "no_fleet", False)):
+        return []
+    if not FleetSettings.from_config(config).enabled:
+        return []
+    from softplc.fleet.adapter import FleetAdapter
+
+    return [FleetAdapter.from_config(config)]

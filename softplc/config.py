@@ -306,7 +306,7 @@ class _Checker:
             width = max(2, len(str(count)))
             return [f"{prefix}{index:0{width}d}" for index in range(1, count + 1)]
         if explicit is None and count is None:
-            self.problem(base, f"template '{name}' needs 'instances' (a list of names), 'count' or 'instances_from'", at_key=True)
+            self.problem(base, f"template '{name}' needs 'instances' (a list of names) or 'count'", at_key=True)
         return []
 
     def _instances_from(self, name: str, template: dict[str, Any], base: tuple[Any, ...]) -> list[str]:

@@ -74,6 +74,22 @@ TEMPLATE: dict[str, Any] = {
         },
         "count": {"type": "integer", "minimum": 1, "maximum": 9999, "description": "Number of instances PREFIX01..PREFIXnn."},
         "prefix": {"type": "string", "pattern": NAME_PATTERN, "description": "Instance name prefix used with count."},
+        "instances_from": {
+            "description": "Instance names from the `id` of each item of a YAML list in another file "
+            "(e.g. robots/robots.yaml), optionally with initial values taken from the items.",
+            "type": ["string", "object"],
+            "properties": {
+                "file": {"type": "string", "description": "YAML file, relative to this one."},
+                "key": {"type": "string", "description": "The top-level key of the list (default: the file's only list)."},
+                "initial": {
+                    "type": "object",
+                    "additionalProperties": {"type": "string"},
+                    "description": "TAG: dotted.key of an item, e.g. {xpos: start.x}; items without the key keep the tag's initial.",
+                },
+            },
+            "required": ["file"],
+            "additionalProperties": False,
+        },
         "tags": TAGS,
         "initial": {
             "type": "object",
@@ -158,6 +174,25 @@ MODBUS_SERVER: dict[str, Any] = {
     "additionalProperties": False,
 }
 
+FLEET: dict[str, Any] = {
+    "description": "Mobile robots driven by the runtime (softplc.fleet; docs/robots.md).",
+    "type": "object",
+    "properties": {
+        "enabled": {"type": "boolean", "description": "false: no robot is driven (default true)."},
+        "robots": {"type": "string", "description": "Robots file, relative to this one (default robots/robots.yaml)."},
+        "tasks": {"type": "string", "description": "Tasks file (default robots/tasks.yaml)."},
+        "map": {"type": "string", "description": "Occupancy map YAML, ROS map_server format (default robots/maps/factory.yaml)."},
+        "template": {"type": "string", "pattern": NAME_PATTERN, "description": "Template whose instances are the robots' tags (default robot)."},
+        "cycle": DURATION,
+        "max_linear_speed": {"type": "number", "exclusiveMinimum": 0, "description": "Floor speed limit, m/s (default 0.2)."},
+        "max_angular_speed": {"type": "number", "exclusiveMinimum": 0, "description": "Floor turn-rate limit, rad/s (default 0.4)."},
+        "planning_resolution": {"type": "number", "exclusiveMinimum": 0, "description": "Cell size of the A* grid, m (default 0.1)."},
+        "goal_tolerance": {"type": "number", "exclusiveMinimum": 0, "description": "Goal reached within this distance, m (default 0.5)."},
+        "heartbeat_timeout": DURATION,
+    },
+    "additionalProperties": False,
+}
+
 CONFIG_SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "$id": "https://softplc.dev/schema/tagdb.json",
@@ -178,6 +213,7 @@ CONFIG_SCHEMA: dict[str, Any] = {
             "properties": {"opcua": OPCUA_SERVER, "modbus": MODBUS_SERVER},
             "additionalProperties": False,
         },
+        "fleet": FLEET,
         "runtime": {
             "type": "object",
             "properties": {

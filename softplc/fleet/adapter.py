@@ -33,7 +33,7 @@ log = logging.getLogger(__name__)
 
 # Tags every robot needs (NAME → rNN_NAME); remote robots need REMOTE_TAGS too.
 COMMAND_TAGS = ("xgoal", "ygoal", "status")
-PUBLISHED_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "navreason")
+PUBLISHED_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "navreason", "route")
 REMOTE_TAGS = ("report", "agent", "online")
 REQUIRED_TAGS = tuple(dict.fromkeys((*COMMAND_TAGS, *PUBLISHED_TAGS, *PEER_TAGS)))
 PHASES = 10  # robots' cycles are spread over this many slots of the cycle (smoother load)
@@ -79,7 +79,7 @@ class TagIO:
         names = self._names
         values = {
             "xpos": report.x, "ypos": report.y, "heading": report.heading, "speed": report.speed,
-            "navstate": report.navstate.value, "navreason": report.reason,
+            "navstate": report.navstate.value, "navreason": report.reason, "route": report.route,
         }
         # Only what changed: a parked robot costs nothing, a moving one ~5 writes a cycle.
         items = [(names[key], value) for key, value in values.items() if self._last.get(key) != value]
@@ -149,6 +149,7 @@ class RemoteLink:
         items: list[tuple[str, Any]] = [
             (f"{self.id}_xpos", report.x), (f"{self.id}_ypos", report.y), (f"{self.id}_heading", report.heading),
             (f"{self.id}_speed", report.speed), (f"{self.id}_navstate", report.navstate), (f"{self.id}_navreason", report.reason),
+            (f"{self.id}_route", report.route),
         ]
         if not self.online:
             self.online = True

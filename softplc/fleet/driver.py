@@ -7,10 +7,10 @@ needs a path it sets a request that the caller runs off the event loop (`run_pla
 back with `plan_done()`. The same class drives simulated robots in the runtime and real or
 simulated robots in a remote agent.
 
-Traffic rule (deterministic, no deadlock between two robots): a robot stops for any robot it
-would hit; it yields to a navigating robot whose id sorts first, and after `yield_wait` plans a
-detour around it; it only slows down for a robot it has right of way over, and detours around
-it only after `patience`. Parked robots (idle, arrived, failed) are static obstacles.
+Traffic between robots follows `softplc.fleet.traffic`: stop for parked robots and for robots
+with right of way (id sorts first), slow down for the others; a robot that stays blocked plans
+a detour — after `yield_wait` when it has to make way (moving off the other's route if need be),
+after `patience` when it has right of way. Blocked for `give_up` seconds, the trip fails.
 """
 
 from __future__ import annotations
@@ -21,9 +21,10 @@ from dataclasses import dataclass, field
 
 from softplc.fleet.controller import PurePursuit, SpeedLimits, integrate
 from softplc.fleet.floor import Floor
-from softplc.fleet.peers import Peer, PeerView
+from softplc.fleet.peers import Peer, PeerView, encode_route
 from softplc.fleet.planner import Corridor, Disc, PathPlanner, Plan
 from softplc.fleet.robots import Pose, RobotSpec
+from softplc.fleet.traffic import Traffic, TrafficSettings
 
 
 class NavState(enum.Enum):
@@ -43,17 +44,13 @@ class DriverSettings:
 
     goal_tolerance: float = 0.5  # goal reached: status cleared (thesis Eq. 4.1)
     stop_tolerance: float = 0.1  # then keeps creeping to within this of the goal
-    horizon: float = 1.5  # s of motion checked against other robots
-    safety: float = 0.12  # m kept between footprints
-    plan_clearance: float = 0.2  # m a detour keeps from another robot's footprint
-    sense_range: float = 3.0  # m within which other robots are considered
-    slow_band: float = 0.6  # m over which it slows for a robot it has right of way over
-    yield_wait: float = 1.0  # s stopped before detouring around a robot with right of way
-    patience: float = 6.0  # s stopped before detouring around any other robot
+    yield_wait: float = 1.0  # s stopped before making way for a robot with right of way
+    patience: float = 6.0  # s stopped before detouring around a robot we have right of way over
     replan_interval: float = 2.0  # s between detour attempts while blocked
-    give_up: float = 60.0  # s blocked before the goal fails
-    corridor_length: float = 1.5  # m ahead of a navigating robot that detours avoid
+    free_hold: float = 1.0  # s of free driving that end a blockage (no flapping)
+    give_up: float = 180.0  # s blocked before the trip fails
     status_grace: float = 0.35  # s our own status write takes to show in the tags
+    traffic: TrafficSettings = TrafficSettings()
 
 
 @dataclass
@@ -78,6 +75,7 @@ class Report:
     reason: str
     status: bool | None = None
     status_seq: int = 0
+    route: str = ""
 
 
 @dataclass
@@ -89,15 +87,24 @@ class PlanRequest:
     start: tuple[float, float]
     goal: tuple[float, float]
     discs: list[Disc] = field(default_factory=list)
-    corridors: list[Corridor] = field(default_factory=list)
-    detour: bool = False  # a re-plan around other robots (failure keeps the old path)
+    keep_out: list[Corridor] = field(default_factory=list)
+    detour: bool = False  # a re-plan while blocked (failure keeps the robot waiting)
+    make_way: bool = False  # if no detour exists, find a refuge off the keep-out routes
 
 
 def run_plan(request: PlanRequest) -> Plan:
-    """Plan around the other robots; if they block every way, plan through them (wait locally)."""
-    plan = request.planner.plan(request.start, request.goal, request.discs, request.corridors)
-    if not plan.ok and (request.discs or request.corridors) and not request.detour:
-        plan = request.planner.plan(request.start, request.goal)
+    """Run a request: a trip plan, a detour, or a refuge to make way (see PlanRequest)."""
+    planner = request.planner
+    plan = planner.plan(request.start, request.goal, request.discs, (), request.keep_out)
+    if plan.ok or not request.detour and not request.discs:
+        return plan
+    if not request.detour:
+        # Parked robots block every way (e.g. one stands on the goal): drive and wait there.
+        return planner.plan(request.start, request.goal)
+    if request.make_way:
+        refuge = planner.refuge(request.start, request.discs, request.keep_out)
+        refuge.refuge = True
+        return refuge
     return plan
 
 
@@ -121,6 +128,7 @@ class RobotDriver:
         self.planner = floor.planner(self.radius)
         self.limits = limits
         self.settings = settings
+        self.traffic = Traffic(spec.id, self.radius, settings.traffic)
         self.cycle = cycle
         self.pursuit = PurePursuit()
         self.pose = pose or spec.start
@@ -131,15 +139,23 @@ class RobotDriver:
         self.goal: tuple[float, float] | None = None
         self.path: list[tuple[float, float]] | None = None
         self.segment = 0
+        self.route = ""  # the path being followed, as published in rNN_route
         self.plans = 0  # plans requested so far (for tests and statistics)
         self.last_plan: Plan | None = None
         self._arrived = False
+        self._refuge = False  # the path leads off another robot's route, not to the goal
+        self._waiting = False  # no path, still on a trip: waiting for the way to clear
         self._request: PlanRequest | None = None
         self._pending: int | None = None  # serial of the plan in flight
         self._serial = 0
         self._blocked_since: float | None = None
+        self._free_since: float | None = None
+        self._blocker: str | None = None
+        self._blocked_reason = ""
+        self._make_way = False
         self._next_replan = 0.0
         self._status: bool | None = None  # last status we published
+        self._observed = False  # status as read from the tags this cycle
         self._status_until = -math.inf
         self._status_event: bool | None = None
         self.status_seq = 0
@@ -153,12 +169,14 @@ class RobotDriver:
         v, w = 0.0, 0.0
         if self.path is not None:
             v, w = self._follow(now, peers)
+        elif self._waiting:
+            self._blocked(now, self._blocked_reason, self.settings.replan_interval, peers, self._make_way)
         self.v, self.w = v, w
         if v or w:
             self.pose = integrate(self.pose, v, w, self.cycle)
         return Report(
             self.pose.x, self.pose.y, self.pose.heading, v, w, self.navstate, self.reason,
-            self._status_event, self.status_seq,
+            self._status_event, self.status_seq, self.route,
         )
 
     def take_plan_request(self) -> PlanRequest | None:
@@ -173,20 +191,19 @@ class RobotDriver:
         self._pending = None
         self.last_plan = plan
         if plan.ok:
-            self.path = plan.path
-            self.segment = 0
+            self._set_path(plan.path, refuge=plan.refuge)
             if self.navstate is NavState.PLANNING:
                 self._set_state(NavState.MOVING)
             return
         if self.navstate is NavState.PLANNING:
             self._fail(now, plan.reason)
-        # A failed detour keeps the current path: the robot waits and tries again later.
+        # A failed detour keeps the robot where it is: it waits and tries again later.
 
     # -- commands ------------------------------------------------------------------------
 
     def _command(self, now: float, command: Command, peers: PeerView) -> None:
         goal = (command.goal_x, command.goal_y)
-        status = command.status
+        status = self._observed = command.status
         if self._status is not None and now < self._status_until:
             status = self._status  # our own write has not reached the tags yet
         if self.goal is None:
@@ -201,9 +218,12 @@ class RobotDriver:
 
     def _start(self, now: float, goal: tuple[float, float], peers: PeerView) -> None:
         self.goal = goal
-        self.path = None
+        self._set_path(None)
+        self._waiting = False
         self._arrived = False
         self._blocked_since = None
+        self._blocker = None
+        self._make_way = False
         self._pending = None
         if self._distance(goal) <= self.settings.goal_tolerance:
             self._arrive(now)
@@ -211,14 +231,22 @@ class RobotDriver:
         self._set_status(now, True)
         self._set_state(NavState.PLANNING)
         # Parked robots are obstacles from the start; moving ones are handled on the way.
-        discs = [self._disc(peer) for peer in peers.near(self.id, self.pose.x, self.pose.y, 30.0) if not peer.active]
-        self._request_plan(goal, discs, [], detour=False)
+        discs = self.traffic.parked(self.pose, peers, self.planner.resolution)
+        self._request_plan(PlanRequest(0, self.planner, (self.pose.x, self.pose.y), goal, discs))
 
-    def _request_plan(self, goal: tuple[float, float], discs: list[Disc], corridors: list[Corridor], *, detour: bool) -> None:
+    def _request_plan(self, request: PlanRequest) -> None:
         self._serial += 1
         self.plans += 1
-        self._pending = self._serial
-        self._request = PlanRequest(self._serial, self.planner, (self.pose.x, self.pose.y), goal, discs, corridors, detour)
+        self._pending = request.serial = self._serial
+        self._request = request
+
+    def _set_path(self, path: list[tuple[float, float]] | None, *, refuge: bool = False) -> None:
+        self.path = path
+        self.segment = 0
+        self._refuge = refuge and path is not None
+        if path is not None:
+            self._waiting = False
+        self.route = encode_route(path) if path is not None else ""
 
     def _arrive(self, now: float) -> None:
         self._arrived = True
@@ -226,7 +254,8 @@ class RobotDriver:
         self._set_status(now, False)
 
     def _fail(self, now: float, reason: str) -> None:
-        self.path = None
+        self._set_path(None)
+        self._waiting = False
         self._set_state(NavState.FAILED, reason)
         self._set_status(now, False)
 
@@ -235,7 +264,7 @@ class RobotDriver:
         self.reason = reason
 
     def _set_status(self, now: float, value: bool) -> None:
-        if self._status is value:
+        if self._status is value and self._observed is value:
             return
         self._status = value
         self._status_until = now + self.settings.status_grace
@@ -255,82 +284,63 @@ class RobotDriver:
             self._arrive(now)
         end = self.path[-1]
         if math.hypot(end[0] - pose.x, end[1] - pose.y) <= settings.stop_tolerance:
-            self.path = None
-            if not self._arrived:  # a goal snapped out of an obstacle: as close as it gets
+            refuge = self._refuge
+            self._set_path(None)
+            if refuge:  # off the other robot's route: wait there until the way is clear
+                self._waiting = True
+            elif not self._arrived:  # a goal snapped out of an obstacle: as close as it gets
                 self._arrive(now)
             return 0.0, 0.0
         self.segment = self.pursuit.progress(pose, self.path, self.segment)
         v, w = self.pursuit.command(pose, self.path, self.segment, self.limits, (self.v, self.w), self.cycle)
-        v, blocker, yielding = self._traffic(v, w, peers)
+        verdict = self.traffic.check(pose, v, w, peers, self._blocker)
+        v = verdict.v
         if v and not self._clear_of_walls(v, w):
-            v, w = 0.0, 0.0
-            self._blocked(now, None, "too close to a wall", settings.yield_wait, peers)
-            return v, w
+            self._blocker = None
+            self._blocked(now, "too close to a wall", settings.yield_wait, peers, False)
+            return 0.0, 0.0
+        blocker = verdict.blocker
         if blocker is not None and v == 0.0:
+            self._blocker = blocker.id
             if self._arrived:  # the last centimetres are not worth a detour
-                self.path = None
+                self._set_path(None)
                 return 0.0, 0.0
-            what = "yielding to" if yielding else "blocked by" if not blocker.active else "waiting for"
-            wait = settings.yield_wait if yielding or not blocker.active else settings.patience
-            self._blocked(now, blocker, f"{what} {blocker.id}", wait, peers)
-            return 0.0, w
-        self._blocked_since = None
-        if not self._arrived and self.navstate is not NavState.MOVING:
-            self._set_state(NavState.MOVING)
-        return v, w
-
-    def _traffic(self, v: float, w: float, peers: PeerView) -> tuple[float, Peer | None, bool]:
-        """The speed allowed by the other robots, the robot that limits it, and whether we yield."""
-        settings = self.settings
-        pose = self.pose
-        my_rank = peers.rank_of(self.id)
-        blocker: Peer | None = None
-        yielding = False
-        for peer in peers.near(self.id, pose.x, pose.y, settings.sense_range):
-            limit = self.radius + peer.radius + settings.safety
-            now_gap = math.hypot(peer.x - pose.x, peer.y - pose.y)
-            stay = self._min_distance(peer, 0.0, 0.0)
-            go = self._min_distance(peer, v, w) if v else stay
-            if not (go < limit and go < stay - 1e-4):
-                continue  # our motion does not bring us closer than staying put would
-            if not peer.active or peer.rank < my_rank:
-                v = 0.0
-                if blocker is None or (peer.active and peer.rank < my_rank and not yielding):
-                    blocker, yielding = peer, peer.active
+            if verdict.yielding:
+                self._blocked(now, f"yielding to {blocker.id}", settings.yield_wait, peers, True)
+            elif not blocker.active:
+                self._blocked(now, f"blocked by {blocker.id}", settings.yield_wait, peers, False)
             else:
-                scale = max(0.0, min(1.0, (now_gap - limit) / settings.slow_band))
-                v *= scale
-                if v < 0.01:
-                    v = 0.0
-                    blocker = blocker or peer
-        return v, blocker, yielding
-
-    def _min_distance(self, peer: Peer, v: float, w: float) -> float:
-        """Smallest distance to `peer` over the horizon if we drive at (v, w) and it keeps going."""
-        pose = self.pose
-        speed = peer.speed if peer.active else 0.0
-        cos_h, sin_h = math.cos(peer.heading), math.sin(peer.heading)
-        best = math.hypot(peer.x - pose.x, peer.y - pose.y)
-        steps = 6
-        for k in range(1, steps + 1):
-            t = self.settings.horizon * k / steps
-            mine = integrate(pose, v, w, t) if v else pose
-            px, py = peer.x + speed * t * cos_h, peer.y + speed * t * sin_h
-            best = min(best, math.hypot(px - mine.x, py - mine.y))
-        return best
+                self._blocked(now, f"waiting for {blocker.id}", settings.patience, peers, False)
+            return 0.0, w
+        self._blocker = None
+        if self._free_since is None:
+            self._free_since = now
+        if now - self._free_since >= settings.free_hold and not self._refuge:
+            self._blocked_since = None
+        if not self._arrived:
+            if self._refuge:
+                self._set_state(NavState.BLOCKED, self._blocked_reason)
+            elif self.navstate is not NavState.MOVING:
+                self._set_state(NavState.MOVING)
+        return v, w
 
     def _clear_of_walls(self, v: float, w: float) -> bool:
         ahead = integrate(self.pose, v, w, self.cycle)
         if self.floor.fits(ahead.x, ahead.y, self.radius):
             return True
-        # Already too close (e.g. pushed there by a detour): moving away is always allowed.
-        return self.floor.clearance(ahead.x, ahead.y) > self.floor.clearance(self.pose.x, self.pose.y)
+        # Already too close (e.g. pushed there by a detour): moving no closer is allowed.
+        return self.floor.clearance(ahead.x, ahead.y) >= self.floor.clearance(self.pose.x, self.pose.y)
 
-    def _blocked(self, now: float, blocker: Peer | None, reason: str, wait: float, peers: PeerView) -> None:
+    def _blocked(self, now: float, reason: str, wait: float, peers: PeerView, make_way: bool) -> None:
         settings = self.settings
+        self._free_since = None
         if self._blocked_since is None:
             self._blocked_since = now
             self._next_replan = now + wait
+        if make_way and reason.startswith("yielding"):
+            reason = "making way for" + reason[len("yielding to"):]
+        self._blocked_reason = reason
+        self._make_way = make_way or self._make_way and self._refuge
         if not self._arrived:
             self._set_state(NavState.BLOCKED, reason)
         if now - self._blocked_since >= settings.give_up:
@@ -338,24 +348,6 @@ class RobotDriver:
             return
         if now >= self._next_replan and self._pending is None and self.goal is not None:
             self._next_replan = now + settings.replan_interval
-            self._request_detour(peers)
-
-    def _request_detour(self, peers: PeerView) -> None:
-        settings = self.settings
-        assert self.goal is not None
-        discs, corridors = [], []
-        for peer in peers.near(self.id, self.pose.x, self.pose.y, settings.sense_range + 2.0):
-            discs.append(self._disc(peer))
-            if peer.active:
-                reach = self.radius + peer.radius + settings.plan_clearance
-                x1 = peer.x + settings.corridor_length * math.cos(peer.heading)
-                y1 = peer.y + settings.corridor_length * math.sin(peer.heading)
-                corridors.append(Corridor(peer.x, peer.y, x1, y1, reach))
-        self._request_plan(self.goal, discs, corridors, detour=True)
-
-    def _disc(self, peer: Peer) -> Disc:
-        radius = self.radius + peer.radius + self.settings.plan_clearance
-        gap = math.hypot(peer.x - self.pose.x, peer.y - self.pose.y)
-        # Never wall ourselves in: the disc stops short of where we stand.
-        radius = min(radius, gap - 1.5 * self.planner.resolution)
-        return Disc(peer.x, peer.y, max(radius, 0.0))
+            discs, keep_out = self.traffic.detour(self.pose, peers, self.planner.resolution, make_way=make_way)
+            start = (self.pose.x, self.pose.y)
+            self._request_plan(PlanRequest(0, self.planner, start, self.goal, discs, keep_out, detour=True, make_way=make_way))

@@ -14,18 +14,20 @@ from softplc.fleet.planner import PathPlanner
 class Floor:
     """A map shared by all robots: wall clearance for safety checks and cached planners."""
 
-    def __init__(self, grid: OccupancyGrid, *, planning_resolution: float = 0.1, margin: float = 0.1) -> None:
+    def __init__(self, grid: OccupancyGrid, *, planning_resolution: float = 0.1, margin: float = 0.15) -> None:
         self.grid = grid
         self.planning_resolution = planning_resolution
         self.margin = margin
         # Distance from every fine cell to the nearest wall: the ground truth for "is this
         # robot touching a wall", independent of the coarse planning grid.
-        self._clearance = grid.clearance().astype(np.float32)
+        # Distances are between cell centres: the wall's surface is half a cell nearer, and a
+        # point is up to half a cell diagonal from its cell's centre, so subtract both.
+        self._clearance = (grid.clearance() - 1.21 * grid.resolution).astype(np.float32)
         self._planners: dict[int, PathPlanner] = {}
         self._lock = threading.Lock()  # planners may be requested from executor threads
 
     def clearance(self, x: float, y: float) -> float:
-        """Metres from (x, y) to the nearest wall (0 outside the map or inside a wall)."""
+        """Metres from (x, y) to the nearest wall, never overestimated (<= 0: touching or outside)."""
         ix, iy = self.grid.cell(x, y)
         if not self.grid.inside(ix, iy):
             return 0.0
@@ -33,8 +35,7 @@ class Floor:
 
     def fits(self, x: float, y: float, radius: float) -> bool:
         """True when a robot of `radius` centred at (x, y) touches no wall."""
-        # The clearance of a cell centre is within half a cell diagonal of the point's own.
-        return self.clearance(x, y) >= radius - self.grid.resolution * 0.71
+        return self.clearance(x, y) >= radius
 
     def planner(self, radius: float) -> PathPlanner:
         """The planner for robots of this radius (built once, rounded to the centimetre)."""

@@ -1,21 +1,25 @@
 """What a robot knows of the other robots: their tags, and nothing else (thesis §3.7).
 
 A `PeerView` is built from the robots' tag values (`rNN_xpos`, `rNN_ypos`, `rNN_heading`,
-`rNN_speed`, `rNN_navstate`, `rNN_radius`) — in-process from the tag database, in a remote agent
-from its OPC UA subscriptions — so robots never talk to each other directly. Priority between
-robots is deterministic: the robot whose id sorts first has right of way.
+`rNN_speed`, `rNN_navstate`, `rNN_radius`, `rNN_route`) — in-process from the tag database, in a
+remote agent from its OPC UA subscriptions — so robots never talk to each other directly.
+Priority between robots is deterministic: the robot whose id sorts first has right of way.
+A robot's route (`rNN_route`, "x,y x,y ...") is the path it is following, so robots without
+right of way can get out of its way.
 """
 
 from __future__ import annotations
 
+import functools
+import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 ACTIVE_STATES = frozenset({"planning", "moving", "blocked"})
-PEER_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "radius")
+PEER_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "radius", "route")
 
 
 @dataclass
@@ -30,6 +34,19 @@ class Peer:
     active: bool  # navigating: it may move on its own; otherwise a static obstacle
     radius: float
     rank: int  # 0 has right of way over everyone
+    route: list[tuple[float, float]] = field(default_factory=list)
+
+    def remaining_route(self, fallback_length: float = 1.5) -> list[tuple[float, float]]:
+        """Where it is going: its route from the point nearest to it on (or straight ahead)."""
+        route = self.route
+        if len(route) < 2:
+            return [(self.x, self.y), (self.x + fallback_length * math.cos(self.heading), self.y + fallback_length * math.sin(self.heading))]
+        best, best_index = math.inf, 0
+        for index, (a, b) in enumerate(zip(route, route[1:])):
+            distance = _segment_distance(self.x, self.y, a, b)
+            if distance < best:
+                best, best_index = distance, index
+        return [(self.x, self.y), *route[best_index + 1 :]]
 
 
 class PeerView:
@@ -45,6 +62,7 @@ class PeerView:
         self.speed = [_number(row[3]) for row in rows]
         self.active = [row[4] in ACTIVE_STATES for row in rows]
         self.radius = [_number(row[5]) or 0.2 for row in rows]
+        self.routes = [row[6] if len(row) > 6 and isinstance(row[6], str) else "" for row in rows]
         ranking = sorted(self.ids)
         self.rank = {robot_id: position for position, robot_id in enumerate(ranking)}
 
@@ -67,6 +85,7 @@ class PeerView:
             self.active[position],
             self.radius[position],
             self.rank[robot_id],
+            decode_route(self.routes[position]) if self.active[position] else [],
         )
 
     def near(self, robot_id: str, x: float, y: float, within: float) -> list[Peer]:
@@ -82,6 +101,31 @@ class PeerView:
 
     def rank_of(self, robot_id: str) -> int:
         return self.rank.get(robot_id, len(self.rank))
+
+
+def encode_route(path: Sequence[tuple[float, float]]) -> str:
+    """'x,y x,y ...' in centimetres, for the rNN_route tag."""
+    return " ".join(f"{x:.2f},{y:.2f}" for x, y in path)
+
+
+@functools.lru_cache(maxsize=4096)
+def decode_route(text: str) -> list[tuple[float, float]]:
+    """The points of a route tag ('' or garbage: no route)."""
+    points = []
+    for pair in text.split():
+        x, _, y = pair.partition(",")
+        try:
+            points.append((float(x), float(y)))
+        except ValueError:
+            return []
+    return points
+
+
+def _segment_distance(px: float, py: float, a: tuple[float, float], b: tuple[float, float]) -> float:
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    length2 = dx * dx + dy * dy
+    t = max(0.0, min(1.0, ((px - a[0]) * dx + (py - a[1]) * dy) / length2)) if length2 > 0 else 0.0
+    return math.hypot(px - (a[0] + t * dx), py - (a[1] + t * dy))
 
 
 def _number(value: Any) -> float:

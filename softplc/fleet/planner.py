@@ -54,6 +54,7 @@ class Plan:
     grid_length: float = 0.0  # metres along the 8-connected A* path, before smoothing
     expanded: int = 0  # cells A* expanded
     seconds: float = 0.0  # wall time spent planning
+    refuge: bool = False  # a path off other robots' routes (to make way), not to the goal
 
 
 class PathPlanner:
@@ -135,14 +136,90 @@ class PathPlanner:
         goal: tuple[float, float],
         discs: Sequence[Disc] = (),
         corridors: Sequence[Corridor] = (),
+        keep_out: Sequence[Corridor] = (),
     ) -> Plan:
-        """Shortest collision-free path from `start` to (near) `goal`, or the reason there is none."""
+        """Shortest collision-free path from `start` to (near) `goal`, or the reason there is none.
+
+        `discs` and `keep_out` capsules are hard obstacles (only the start cell is exempt),
+        `corridors` are soft: crossed only when that is cheaper than going around.
+        """
         began = time.perf_counter()
-        result = self._plan(start, goal, discs, corridors)
+        result = self._plan(start, goal, discs, corridors, keep_out)
         result.seconds = time.perf_counter() - began
         return result
 
-    def _plan(self, start: tuple[float, float], goal: tuple[float, float], discs: Sequence[Disc], corridors: Sequence[Corridor]) -> Plan:
+    def refuge(self, start: tuple[float, float], discs: Sequence[Disc], keep_out: Sequence[Corridor]) -> Plan:
+        """Path to the nearest reachable spot clear of every `keep_out` capsule (to make way)."""
+        began = time.perf_counter()
+        result = self._refuge(start, discs, keep_out)
+        result.seconds = time.perf_counter() - began
+        return result
+
+    def _obstacles(self, start: int, goal: int | None, discs: Sequence[Disc], capsules: Sequence[Corridor]) -> list[bool]:
+        blocked = list(self._static)
+        protected = {start, goal}
+        for disc in discs:
+            for index in self._cells_near(disc.x, disc.y, disc.x, disc.y, disc.radius):
+                if index not in protected:
+                    blocked[index] = True
+        for capsule in capsules:
+            for index in self._cells_near(capsule.x0, capsule.y0, capsule.x1, capsule.y1, capsule.radius):
+                if index not in protected:
+                    blocked[index] = True
+        return blocked
+
+    def _refuge(self, start: tuple[float, float], discs: Sequence[Disc], keep_out: Sequence[Corridor]) -> Plan:
+        start_cell = self.nearest_free(start[0], start[1], 1.0)
+        if start_cell is None:
+            return Plan(False, reason=f"start ({start[0]:.2f}, {start[1]:.2f}) is not in free space")
+        origin = self._index(*start_cell)
+        blocked = self._obstacles(origin, None, discs, ())
+        unsafe: set[int] = set()
+        for capsule in keep_out:
+            # One cell more than the capsule: the refuge must be clear of it, not on its rim.
+            unsafe.update(self._cells_near(capsule.x0, capsule.y0, capsule.x1, capsule.y1, capsule.radius + self.resolution))
+        # Dijkstra outwards; the first settled cell outside every capsule is the nearest refuge.
+        cost: dict[int, float] = {origin: 0.0}
+        parent: dict[int, int] = {origin: -1}
+        heap: list[tuple[float, int]] = [(0.0, origin)]
+        settled: set[int] = set()
+        while heap:
+            distance, current = heapq.heappop(heap)
+            if current in settled:
+                continue
+            settled.add(current)
+            if current not in unsafe:
+                cells = [current]
+                while parent[cells[-1]] != -1:
+                    cells.append(parent[cells[-1]])
+                cells.reverse()
+                cells = self._smooth(cells, blocked, {})
+                path = [start] + [self.grid.center(*self._cell_of_index(index)) for index in cells[1:]]
+                if len(path) == 1:
+                    path.append(start)
+                length = sum(math.dist(a, b) for a, b in zip(path, path[1:]))
+                return Plan(True, path, length=length, expanded=len(settled))
+            for offset, step, sides in self._moves:
+                neighbour = current + offset
+                if blocked[neighbour] or neighbour in settled:
+                    continue
+                if sides and (blocked[current + sides[0]] or blocked[current + sides[1]]):
+                    continue
+                new_cost = distance + step
+                if new_cost < cost.get(neighbour, math.inf):
+                    cost[neighbour] = new_cost
+                    parent[neighbour] = current
+                    heapq.heappush(heap, (new_cost, neighbour))
+        return Plan(False, reason="no spot out of the way is reachable", expanded=len(settled))
+
+    def _plan(
+        self,
+        start: tuple[float, float],
+        goal: tuple[float, float],
+        discs: Sequence[Disc],
+        corridors: Sequence[Corridor],
+        keep_out: Sequence[Corridor] = (),
+    ) -> Plan:
         sx, sy = start
         gx, gy = goal
         if not self.grid.inside(*self.grid.cell(gx, gy)):
@@ -158,16 +235,11 @@ class PathPlanner:
             return Plan(False, reason=f"goal ({gx:.2f}, {gy:.2f}) is unreachable from ({sx:.2f}, {sy:.2f}): walls separate them")
         blocked = self._static
         penalty: dict[int, float] = {}
-        if discs or corridors:
-            blocked = list(self._static)
-            protected = {self._index(*start_cell), self._index(*goal_cell)}
-            for disc in discs:
-                for index in self._cells_near(disc.x, disc.y, disc.x, disc.y, disc.radius):
-                    if index not in protected:
-                        blocked[index] = True
-            for corridor in corridors:
-                for index in self._cells_near(corridor.x0, corridor.y0, corridor.x1, corridor.y1, corridor.radius):
-                    penalty[index] = max(penalty.get(index, 0.0), corridor.penalty)
+        if discs or keep_out:
+            blocked = self._obstacles(self._index(*start_cell), self._index(*goal_cell), discs, keep_out)
+        for corridor in corridors:
+            for index in self._cells_near(corridor.x0, corridor.y0, corridor.x1, corridor.y1, corridor.radius):
+                penalty[index] = max(penalty.get(index, 0.0), corridor.penalty)
         cells, expanded = self._astar(self._index(*start_cell), self._index(*goal_cell), blocked, penalty)
         if cells is None:
             return Plan(False, reason=f"no path to ({gx:.2f}, {gy:.2f}): blocked by other robots", expanded=expanded)

@@ -54,6 +54,7 @@ def encode_report(seq: int, report: Report, status_seq: int, status: bool | None
         "speed": round(report.speed, 5),
         "navstate": report.navstate.value,
         "reason": report.reason,
+        "route": report.route,
         "status_seq": status_seq,
     }
     if status is not None:
@@ -74,6 +75,7 @@ class RemoteReport:
     reason: str
     status_seq: int
     status: bool | None
+    route: str = ""
 
 
 def decode_report(text: str) -> RemoteReport:
@@ -91,6 +93,7 @@ def decode_report(text: str) -> RemoteReport:
             reason=str(data.get("reason", "")),
             status_seq=int(data.get("status_seq", 0)),
             status=bool(data["status"]) if "status" in data else None,
+            route=str(data.get("route", "")),
         )
     except KeyError as error:
         raise ValueError(f"report lacks {error}") from None
