@@ -266,3 +266,20 @@ def test_an_overlap_hidden_behind_a_short_tag_is_found(make_config):
     assert len(problems) == 2
     assert "'small' (holding registers 101) overlaps 'wide'" in problems[0]
     assert "'other' (holding registers 102) overlaps 'wide'" in problems[1]
+
+
+def test_run_flags_build_or_skip_the_modbus_adapter(make_config, capsys):
+    from softplc.adapters import build_adapters
+    from softplc.cli import build_parser
+
+    config = make_config(BASE + "servers:\n  modbus: {port: 1502}\n")
+    parser = build_parser()
+    modbus = [a for a in build_adapters(config, parser.parse_args(["run", "--no-opcua"])) if a.name == "modbus"]
+    assert len(modbus) == 1 and modbus[0].settings.port == 1502
+    moved = [a for a in build_adapters(config, parser.parse_args(["run", "--no-opcua", "--modbus-port", "0", "--modbus-host", "0.0.0.0"])) if a.name == "modbus"]
+    assert (moved[0].settings.host, moved[0].settings.port) == ("0.0.0.0", 0)
+    assert not [a for a in build_adapters(config, parser.parse_args(["run", "--no-opcua", "--no-modbus"])) if a.name == "modbus"]
+    assert not [a for a in build_adapters(make_config(BASE), parser.parse_args(["run", "--no-opcua"])) if a.name == "modbus"]
+    with pytest.raises(SystemExit):
+        parser.parse_args(["run", "--modbus-port", "70000"])
+    assert "port 70000 is outside 0..65535" in capsys.readouterr().err

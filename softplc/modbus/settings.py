@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -55,3 +56,14 @@ class ModbusSettings:
         if disable:
             settings = replace(settings, enabled=False)
         return settings
+
+
+def port_number(text: str) -> int:
+    """argparse type for --modbus-port: an integer 0..65535 (0 = any free port)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"port {port} is outside 0..65535")
+    return port
