@@ -69,7 +69,8 @@ def softplc(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Softplc]:
     config = folder / "tagdb.yaml"
     config.write_text(PLANT)
     process = subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "run", str(config), "--modbus-port", "0", "--no-status", "--state-dir", str(folder / "state")],
+        [sys.executable, "-m", "softplc.cli", "run", str(config), "--modbus-port", "0", "--no-opcua", "--no-status",
+         "--state-dir", str(folder / "state")],
         cwd=str(REPO), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )
     watchdog = threading.Timer(30, process.kill)  # a hung start fails the test instead of hanging it
