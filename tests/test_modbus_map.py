@@ -283,3 +283,13 @@ def test_run_flags_build_or_skip_the_modbus_adapter(make_config, capsys):
     with pytest.raises(SystemExit):
         parser.parse_args(["run", "--modbus-port", "70000"])
     assert "port 70000 is outside 0..65535" in capsys.readouterr().err
+
+
+def test_system_tags_that_do_not_fit_are_left_out_with_a_warning(make_config, caplog):
+    config = make_config(BASE + "tasks:\n  fast: {interval: 10ms}\nservers:\n  modbus: {system_base: 65500}\n")
+    with caplog.at_level("WARNING", logger="softplc.modbus.address_map"):
+        m = build_address_map(config)
+    assert "r01_busy" in m.by_tag and "_sys.reset_stats" in m.by_tag  # coils still fit
+    assert "_sys.fast.latency_ms_p99" not in m.by_tag
+    assert all(mapping.end <= 65536 for mapping in m.mappings)
+    assert "_sys. tags (from _sys." in caplog.text and "not served over Modbus" in caplog.text

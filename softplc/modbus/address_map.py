@@ -11,7 +11,8 @@ Allocation rule (stable across restarts; see docs/modbus.md):
   therefore depends only on the unpinned tags declared before it in the same table: adding a
   tag at the end, or pinning a new one, never moves an existing tag.
 - `_sys.` tags are packed the same way from `system_base` (default 60000) of each table, so
-  plant tags added later never move them.
+  plant tags added later never move them (those that do not fit below 65536 are left out,
+  with a warning).
 - Any overlap (pinned on pinned, pinned on packed, packed reaching the system block) is a
   configuration error with FILE:LINE:COL — never a silent move.
 """
@@ -19,6 +20,7 @@ Allocation rule (stable across restarts; see docs/modbus.md):
 from __future__ import annotations
 
 import enum
+import logging
 from array import array
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -33,6 +35,7 @@ from softplc.tags import Access, TagDef
 from softplc.yamlsource import ConfigError, Location, Problem, SourceMap
 
 ADDRESS_SPACE = 65536
+log = logging.getLogger(__name__)
 
 
 class Table(enum.Enum):
@@ -229,29 +232,27 @@ class _Builder:
         settings = self.settings
         user: list[Mapping] = []
         cursors = {table: 0 for table in Table}
-        first_auto: dict[Table, Mapping] = {}
         for tag in self.config.tags:
             mapping = self._place(tag, cursors)
-            if mapping is None:
-                continue
-            if not mapping.pinned:
-                first_auto.setdefault(mapping.table, mapping)
-            user.append(mapping)
+            if mapping is not None:
+                user.append(mapping)
         system: list[Mapping] = []
         if settings.system_tags:
             system_cursors = {table: settings.system_base for table in Table}
+            left_out: list[str] = []
             for tag in system_tag_definitions(self.config.tasks):
                 mapping = self._default_mapping(tag, system_cursors[_default_table(tag)], {}, pinned=False)
                 if mapping is None:
                     continue
                 if mapping.end > ADDRESS_SPACE:
-                    # Too many tasks/programs for the system block: serve what fits, say so once.
-                    self.problems.append(Problem(Location(self.source.file, 1, 1),
-                        f"the _sys. tags do not fit above system_base {settings.system_base} in {mapping.table.plural}; "
-                        "lower servers.modbus.system_base or set system_tags: false"))
-                    break
+                    # Diagnostics are not worth refusing to serve the plant: serve what fits.
+                    left_out.append(tag.name)
+                    continue
                 system_cursors[mapping.table] = mapping.end
                 system.append(mapping)
+            if left_out:
+                log.warning("%d _sys. tags (from %s on) do not fit above servers.modbus.system_base %d and are not "
+                            "served over Modbus; lower system_base or string_words", len(left_out), left_out[0], settings.system_base)
             for mapping in user:
                 if not mapping.pinned and mapping.end > settings.system_base:
                     self.problem(mapping.tag, None,
