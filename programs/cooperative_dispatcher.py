@@ -1,0 +1,24 @@
+"""Heterogeneous cooperative dispatcher (thesis case study II).
+
+A robot compatible with one task only (a dedicated robot) always stays on it; a multi-skilled
+robot goes where the task weighting of case I says it is needed most, among the tasks it can
+serve. Which robot can serve which task comes from the robot and task specifications through
+the fleet's compatibility check (size, load capacity, speeds, hardware — thesis Tables 6–7):
+the `compatible` parameter lists, per robot, the task numbers it may serve, as computed by
+`softplc.fleet.compat` (the scenario runner fills it in; `softplc robots compat` prints it).
+"""
+
+from __future__ import annotations
+
+from programs.task_weighting import TaskWeighting, lowest_weight
+from softplc import Param
+
+
+class CooperativeDispatcher(TaskWeighting):
+    compatible = Param([[1, 2]], "task numbers each robot may serve, one list per robot, e.g. [[1, 2], [2]]")
+
+    def choose(self, robot: int, weights: list[float]) -> int:
+        allowed = self.compatible[robot] if robot < len(self.compatible) else []
+        if len(allowed) == 1:
+            return allowed[0]  # dedicated: stays on its only task
+        return lowest_weight(weights, allowed)

@@ -1,0 +1,74 @@
+"""Task-weighting dispatcher (thesis case study I, Figure 5.1 and matHand_algo's runTaskAlgo).
+
+For every task, each scan:
+
+    x1 = 1 / (iFr * (iBL / iBC))          0 when undefined (empty buffer, zero rate)
+    x2 = 1 / sPPi                         0 when undefined (zero profit index)
+    x3 = (qFr - sCDr) + (qSL - sPD) * 0.2 + 0.1
+    Tw = x1 * x2 * x3
+
+The task with the lowest (most negative) weight gets the next free robot; ties go to the
+lower task number. Every robot's `tnext` gets that task; the motion sequencer takes it when
+the robot is free. Tasks are bound as lists (task number = position + 1), robots too.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+
+from softplc import Input, Output, Program
+
+
+def _ratio(numerator: float, denominator: float) -> float:
+    """numerator / denominator, or 0 when that is undefined (the thesis's `except: x = 0`)."""
+    try:
+        result = numerator / denominator
+    except ZeroDivisionError:
+        return 0.0
+    return result if math.isfinite(result) else 0.0
+
+
+def task_weight(iFr: float, iBL: float, iBC: float, sPPi: float, qFr: float, qSL: float, sCDr: float, sPD: float) -> float:
+    """The thesis's task weight Tw = x1 * x2 * x3 (lower means more urgent)."""
+    x1 = _ratio(1.0, iFr * _ratio(iBL, iBC))
+    x2 = _ratio(1.0, sPPi)
+    x3 = (qFr - sCDr) + (qSL - sPD) * 0.2 + 0.1
+    return x1 * x2 * x3
+
+
+def lowest_weight(weights: Sequence[float], allowed: Iterable[int] | None = None) -> int:
+    """Task number (1-based) with the lowest weight among `allowed` (all if None); 0 if none."""
+    candidates = range(1, len(weights) + 1) if allowed is None else sorted(set(allowed))
+    best, best_weight = 0, math.inf
+    for number in candidates:
+        if 1 <= number <= len(weights) and weights[number - 1] < best_weight:  # strict: ties keep the lower number
+            best, best_weight = number, weights[number - 1]
+    return best
+
+
+class TaskWeighting(Program):
+    iFr = Input("input fill rate per task (tNN_iFr)")
+    iBL = Input("input buffer level % per task (tNN_iBL)")
+    iBC = Input("input buffer capacity per task (tNN_iBC)")
+    sPPi = Input("profit per product index per task (tNN_sPPi)")
+    qFr = Input("output fill rate per task (tNN_qFr)")
+    qSL = Input("output storage level % per task (tNN_qSL)")
+    sCDr = Input("consumer demand rate per task (tNN_sCDr)")
+    sPD = Input("current product demand % per task (tNN_sPD)")
+    Tw = Output("task weight per task (tNN_Tw)")
+    tnext = Output("task chosen for each robot's next trip (rNN_tnext)")
+
+    def scan(self) -> None:
+        self.Tw = self.weights()
+        self.tnext = [self.choose(robot, self.Tw) for robot in range(len(self.tnext))]
+
+    def weights(self) -> list[float]:
+        return [
+            task_weight(*values)
+            for values in zip(self.iFr, self.iBL, self.iBC, self.sPPi, self.qFr, self.qSL, self.sCDr, self.sPD)
+        ]
+
+    def choose(self, robot: int, weights: list[float]) -> int:
+        """The task for robot number `robot` (0-based): here the lowest weight of all."""
+        return lowest_weight(weights)
