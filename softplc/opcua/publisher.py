@@ -6,7 +6,8 @@ value). A background coroutine pushes the noted tags with `write_attribute_value
 which updates the node and feeds subscriptions but skips the Write service's hooks, and
 yields to the event loop whenever it has worked for `slice_seconds`, so a 10 ms task keeps
 its start latency and clients never see the server stall (asyncua clients drop their
-session after ~1 s of silence).
+session after ~1 s of silence). A slice starts only when no scan cycle is about to start
+(see `scheduling.ScanGuard`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from collections.abc import Callable, Sequence
 from asyncua import ua
 from asyncua.server.address_space import AddressSpace
 
+from softplc.opcua.scheduling import ScanGuard
 from softplc.opcua.variants import data_value
 from softplc.tagdb import TagDatabase
 from softplc.tags import Tag
@@ -31,10 +33,19 @@ _VALUE = ua.AttributeIds.Value
 class Publisher:
     """Mirrors tag changes into the address space in time slices."""
 
-    def __init__(self, db: TagDatabase, aspace: AddressSpace, node_ids: dict[str, ua.NodeId], slice_seconds: float = 0.0003) -> None:
+    def __init__(
+        self,
+        db: TagDatabase,
+        aspace: AddressSpace,
+        node_ids: dict[str, ua.NodeId],
+        *,
+        guard: ScanGuard | None = None,
+        slice_seconds: float = 0.00025,
+    ) -> None:
         self.db = db
         self.aspace = aspace
         self.node_ids = node_ids
+        self.guard = guard or ScanGuard()
         self.slice_seconds = slice_seconds
         self.pushed = 0  # values written into the address space so far
         self._pending: dict[str, Tag] = {}
@@ -90,11 +101,13 @@ class Publisher:
             batch, self._pending = self._pending, {}
             write = self.aspace.write_attribute_value
             node_ids = self.node_ids
+            await self.guard.clear()
             slice_end = time.perf_counter() + self.slice_seconds
             for count, (name, tag) in enumerate(batch.items(), 1):
                 dv = data_value(tag.definition, tag.value, tag.quality, tag.timestamp)
                 await write(node_ids[name], _VALUE, dv)
-                if count & 15 == 0 and time.perf_counter() > slice_end:
+                if count & 3 == 0 and time.perf_counter() > slice_end:
                     await asyncio.sleep(0)
+                    await self.guard.clear()
                     slice_end = time.perf_counter() + self.slice_seconds
             self.pushed += len(batch)

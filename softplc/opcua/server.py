@@ -31,6 +31,7 @@ from softplc import __version__
 from softplc.opcua.address_space import AddressSpaceBuilder, plan_folders, tag_node_id
 from softplc.opcua.publisher import Publisher
 from softplc.opcua.roles import RolePermissions
+from softplc.opcua.scheduling import ScanGuard
 from softplc.opcua.security import ClientCertificateValidator, Pki, SecuredChannels
 from softplc.opcua.settings import POLICIES, POLICY_NONE, POLICY_TEXT, OpcUaSettings
 from softplc.opcua.transport import GuardedServer
@@ -82,10 +83,12 @@ class OpcUaServer:
             raise AdapterError(f"OPC UA users file is invalid:\n{error}") from None
         self.pki = Pki(settings.pki_path(runtime.state_dir))
         self._secured_channels = SecuredChannels()
+        self.guard = ScanGuard.for_runtime(runtime)
         server = GuardedServer(
             user_manager=SoftplcUserManager(self.users, settings.anonymous_role),
             secured=self._secured_channels,
             offer_none=POLICY_NONE in settings.policies,
+            guard=self.guard,
         )
         self.server = server
         server.name = f"softplc {runtime.config.name}"
@@ -188,7 +191,7 @@ class OpcUaServer:
         db = runtime.db
         ns = self.namespace_index
         node_ids = {tag.name: tag_node_id(tag.name, ns) for tag in db}
-        self.publisher = Publisher(db, iserver.aspace, node_ids)
+        self.publisher = Publisher(db, iserver.aspace, node_ids, guard=self.guard)
         self.publisher.start()  # listen first: a change made while we build is pushed after
         builder = AddressSpaceBuilder(iserver.aspace, ns)
         roots = plan_folders((tag.definition for tag in db), self.settings.folder_size)

@@ -30,6 +30,7 @@ from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
 from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua.ua_binary import uatcp_to_binary
 
+from softplc.opcua.scheduling import GuardedSubscriptionService, ScanGuard
 from softplc.opcua.security import SecuredChannels
 
 log = logging.getLogger(__name__)
@@ -102,7 +103,10 @@ class TrackingPolicyFactory:
 
 
 class GuardedProtocol(OPCUAProtocol):
-    """One client connection: refuses oversized or non-OPC UA frames before buffering them."""
+    """One client connection: refuses oversized or non-OPC UA frames before buffering them,
+    and processes each request only when no scan cycle is about to start."""
+
+    guard: ScanGuard = ScanGuard()
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         super().connection_made(transport)
@@ -135,6 +139,7 @@ class GuardedProtocol(OPCUAProtocol):
         return True
 
     async def _process_one_msg(self, header: Any, buf: Any) -> bool:
+        await self.guard.clear()
         try:
             return await super()._process_one_msg(header, buf)
         except PolicyRefused as refused:
@@ -151,23 +156,33 @@ class GuardedProtocol(OPCUAProtocol):
 
 
 class GuardedBinaryServer(BinaryServer):
+    guard: ScanGuard = ScanGuard()
+
     def _make_protocol(self) -> OPCUAProtocol:
-        return GuardedProtocol(
+        protocol = GuardedProtocol(
             iserver=self.iserver,
             policies=self._policies,
             clients=self.clients,
             closing_tasks=self.closing_tasks,
             limits=self.limits,
         )
+        protocol.guard = self.guard
+        return protocol
 
 
 class GuardedServer(Server):
     """asyncua's Server, listening through GuardedBinaryServer with tracked/refused policies."""
 
-    def __init__(self, *args: Any, secured: SecuredChannels, offer_none: bool, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, secured: SecuredChannels, offer_none: bool, guard: ScanGuard, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.secured = secured
         self.offer_none = offer_none
+        self.guard = guard
+        # Subscriptions that publish clear of the scan; set before init() so every user of the
+        # service (sessions, condition refresh) gets this one.
+        service = GuardedSubscriptionService(self.iserver.aspace, iserver=self.iserver, guard=guard)
+        self.iserver.subscription_service = service
+        self.iserver.isession.subscription_service = service
 
     async def start(self) -> None:
         # Server.start of asyncua 2.1.0, with our binary server and policy wrappers.
@@ -182,6 +197,7 @@ class GuardedServer(Server):
         try:
             host, port = self._get_bind_socket_info()
             self.bserver = GuardedBinaryServer(self.iserver, host, port, self.limits)  # type: ignore[arg-type]
+            self.bserver.guard = self.guard
             self.bserver.set_policies(self._policies)
             await self.bserver.start()
         except Exception:
