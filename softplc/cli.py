@@ -31,7 +31,7 @@ EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
 DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules that add subcommands (each defines add_commands(subparsers)).
-COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.opcua.cli", "softplc.latency.command")
+COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.commands", "softplc.scenarios.commands", "softplc.latency.command", "softplc.opcua.cli", "softplc.fleet.cli")
 
 log = logging.getLogger("softplc")
 
