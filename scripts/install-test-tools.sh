@@ -4,6 +4,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 apt_packages=()
 command -v mbpoll >/dev/null 2>&1 || apt_packages+=(mbpoll)
+# node-opcua (tests/node) needs Node.js >= 18 and npm.
+command -v npm >/dev/null 2>&1 || apt_packages+=(nodejs npm)
 if [ ${#apt_packages[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     echo "installing system packages: ${apt_packages[*]}" >&2

@@ -4,7 +4,7 @@ The server shares the event loop with the scan engine. A task's start latency gr
 long the callback running at its release takes, and some OPC UA work cannot be cut short:
 encoding a PublishResponse of 200 notifications takes ~1.5 ms, a big Read or Browse more.
 `ScanGuard.clear()` is awaited before each such piece (a pushed slice of tag changes, an
-incoming request, a subscription's publish): if the next release of any task is less than
+incoming request bigger than 1 KB, a subscription's publish): if the next release of any task is less than
 `guard_seconds` away, it sleeps through that release, so the cycle starts on time and the work
 runs right after it. In the common case it returns at once without yielding.
 """

@@ -123,6 +123,8 @@ class Pki:
         names: list[x509.GeneralName] = [x509.UniformResourceIdentifier(application_uri)]
         for host in dict.fromkeys([*hostnames, socket.gethostname(), "localhost"]):
             names.append(_host_name(host))
+            if isinstance(names[-1], x509.IPAddress):
+                names.append(x509.DNSName(host))  # many OPC UA stacks look only at DNS names
         certificate = generate_self_signed_app_certificate(
             key, "softplc OPC UA server", {"organizationName": "softplc"}, names,
             extended=[ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH], days=CERT_VALID_DAYS,
