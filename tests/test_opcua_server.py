@@ -225,3 +225,22 @@ async def test_system_tags_are_served(plant, operator) -> None:
 
     await wait_until(advanced)
     assert await operator.get_node(ua.NodeId("_sys.state", ns)).read_value() == "RUNNING"
+
+
+async def test_a_client_write_and_the_program_in_the_same_cycle_follow_the_documented_rule(plant) -> None:
+    runtime, server = plant
+    db = runtime.db
+    # `count` is incremented by the Ticker program every scan. The client's value is applied
+    # at the start of a cycle, so that cycle's scan starts from it: 1_000_000 then 1_000_001.
+    seen: list[int] = []
+    stop = db.on_change(lambda tags: seen.extend(t.value for t in tags if t.name == "count"))
+    try:
+        async with client_for(server, "engineer") as engineer:
+            ns = await _ns(engineer)
+            results = await engineer.write_values([engineer.get_node(ua.NodeId("count", ns))], [ua.Variant(1_000_000, ua.VariantType.UInt32)])
+            assert results[0].is_good()
+        await wait_until(lambda: 1_000_001 in seen)
+    finally:
+        stop()
+    at = seen.index(1_000_000)
+    assert seen[at + 1] == 1_000_001  # nothing lost, nothing overwritten
