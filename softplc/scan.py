@@ -285,19 +285,25 @@ class ScanEngine:
                 self.db.apply_journal()
                 await clock.sleep(0.01)
             return
-        while not self._stopping:
-            now = clock.now()
-            due = [task for task in self.tasks if task.next_release <= now]
-            if not due:
-                await clock.sleep_until(min(task.next_release for task in self.tasks))
-                continue
-            # Of the tasks due (several after a long scan), the highest priority goes first,
-            # even if a lower-priority task has waited longer.
-            task = min(due, key=lambda t: (t.priority, t.next_release))
-            self.cycle(task, task.next_release)
-            # Let adapters run between cycles even when the next task is already due (an
-            # overloaded engine must not starve the protocol servers).
-            await asyncio.sleep(0)
+        try:
+            while not self._stopping:
+                now = clock.now()
+                due = [task for task in self.tasks if task.next_release <= now]
+                if not due:
+                    await clock.sleep_until_release(min(task.next_release for task in self.tasks))
+                    continue
+                # Of the tasks due (several after a long scan), the highest priority goes first,
+                # even if a lower-priority task has waited longer.
+                task = min(due, key=lambda t: (t.priority, t.next_release))
+                self.cycle(task, task.next_release)
+                now = clock.now()
+                if not any(t.next_release <= now for t in self.tasks):
+                    clock.cycle_done()  # background work held back for this instant may run now
+                # Let adapters run between cycles even when the next task is already due (an
+                # overloaded engine must not starve the protocol servers).
+                await asyncio.sleep(0)
+        finally:
+            clock.cycle_done()
 
     def cycle(self, task: Task, release: float) -> None:
         clock = self.clock

@@ -139,3 +139,35 @@ async def test_wait_for_measures_its_timeout_on_the_clock() -> None:
     assert await wait_for(clock, answer(), 5.0) == 42
     assert clock.now() == 61.0
     driver.cancel()
+
+
+async def test_real_clock_holds_background_sleepers_back_for_a_due_scan_cycle() -> None:
+    """A sleeper waking within `guard` of the scan engine's release runs after that cycle."""
+    clock = RealClock(guard=0.002)
+    release = clock.now() + 0.010
+    engine = asyncio.create_task(clock.sleep_until_release(release))
+    await asyncio.sleep(0)
+    early_done: list[float] = []
+
+    async def early() -> None:  # well before the guard: not held back
+        await clock.sleep_until(release - 0.006)
+        early_done.append(clock.now())
+
+    late = asyncio.create_task(clock.sleep_until(release - 0.001))  # inside the guard
+    after = asyncio.create_task(clock.sleep_until(release + 0.001))  # after the release
+    await asyncio.gather(early(), engine)
+    assert early_done and early_done[0] < release
+    while clock.now() <= release + 0.0015:  # past both deadlines while the cycle "runs"
+        await asyncio.sleep(0.0005)  # (not the clock: it would hold this sleeper back too)
+    assert clock.now() > release + 0.001 and not late.done() and not after.done()
+    clock.cycle_done()
+    await asyncio.wait_for(asyncio.gather(late, after), timeout=5)
+    # with no release pending, nothing is held back
+    await asyncio.wait_for(clock.sleep_until(clock.now() + 0.001), timeout=5)
+
+
+async def test_real_clock_spin_adapts_to_the_loops_timer_lateness() -> None:
+    clock = RealClock(spin=0.0015, max_spin=0.004)
+    for _ in range(5):
+        await clock.sleep(0.006)
+    assert 0.0005 <= clock.spin <= 0.004
