@@ -63,13 +63,27 @@ async def test_node_opcua_client_browses_reads_writes_and_subscribes(tmp_path) -
 async def test_node_opcua_over_sign_and_encrypt_after_its_certificate_is_trusted(tmp_path) -> None:
     node = _require_node_opcua()
     certificate = make_client_certificate(tmp_path, "node-opcua-client")
-    secure = ("SignAndEncrypt", str(certificate.pem), str(certificate.key), certificate.uri)
+    trusted_flag = tmp_path / "trusted.flag"
     async with running_plant(tmp_path, security=("Basic256Sha256_SignAndEncrypt",), anonymous="off") as (runtime, server):
-        code, seen, output = await _run(node, server.endpoint, "operator", PASSWORDS["operator"], *secure)
-        assert code != 0 and seen is None, "an untrusted node-opcua client got in"
+        process = await asyncio.create_subprocess_exec(
+            node, "opcua_check.js", server.endpoint, "operator", PASSWORDS["operator"],
+            "SignAndEncrypt", str(certificate.pem), str(certificate.key), certificate.uri, str(trusted_flag),
+            cwd=NODE_DIR, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        )
+        assert process.stdout is not None
+        lines: list[str] = []
+        while True:  # node-opcua logs on stdout too: read until its verdict on the first attempt
+            line = (await asyncio.wait_for(process.stdout.readline(), 60)).decode()
+            assert line, "node script ended early: " + "".join(lines)[-2000:]
+            lines.append(line)
+            if line.startswith("REFUSED "):
+                break
+        assert line.split()[1] == "BadCertificateUntrusted"
         pki = Pki(tmp_path / "state" / "pki")
         assert [info.fingerprint for info in pki.list(pki.rejected_dir)] == [fingerprint(certificate.der)]
         pki.trust(fingerprint(certificate.der)[:16])
-        code, seen, output = await _run(node, server.endpoint, "operator", PASSWORDS["operator"], *secure)
-        assert code == 0 and seen is not None, output
-        _check(seen, runtime, server)
+        trusted_flag.touch()
+        rest, stderr = await asyncio.wait_for(process.communicate(), 60)
+        results = [entry[len("RESULT "):] for entry in rest.decode().splitlines() if entry.startswith("RESULT ")]
+        assert process.returncode == 0 and results, (stderr + rest).decode()[-3000:]
+        _check(json.loads(results[0]), runtime, server)

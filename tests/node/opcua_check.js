@@ -1,11 +1,15 @@
 // An independent OPC UA client (node-opcua) exercising softplc's server; run by tests/test_opcua_node.py.
 //
-//   node opcua_check.js ENDPOINT USER PASSWORD [SignAndEncrypt CERT.pem KEY.pem APPLICATION_URI]
+//   node opcua_check.js ENDPOINT USER PASSWORD [SignAndEncrypt CERT.pem KEY.pem APPLICATION_URI [WAIT_FILE]]
 //
 // Connects (SecurityPolicy None, or Basic256Sha256 SignAndEncrypt with the given client
 // certificate; user name + password), browses Objects/Plant, reads a few tags
 // and their attributes, writes good and bad values, subscribes to a scan-driven tag, and prints
-// one JSON object with everything it saw. Exit code 0 unless the script itself failed.
+// one line "RESULT {json}" with everything it saw. Exit code 0 unless the script itself failed.
+//
+// With WAIT_FILE, a first connection is expected to be refused (certificate not yet trusted):
+// the script prints "REFUSED <status>", waits until WAIT_FILE exists (the test trusts the
+// certificate meanwhile), and then runs the checks. One process: node-opcua loads slowly.
 "use strict";
 
 const {
@@ -13,18 +17,43 @@ const {
     StatusCodes, ClientSubscription, ClientMonitoredItem, TimestampsToReturn,
 } = require("node-opcua-client");
 
+const fs = require("fs");
+
+async function refusedFirst(options, endpoint, userName, password, waitFile) {
+    const client = OPCUAClient.create(options);
+    let status = "connected";
+    try {
+        await client.connect(endpoint);
+        const session = await client.createSession({ type: UserTokenType.UserName, userName, password });
+        await session.close();
+    } catch (error) {
+        status = (String(error.message).match(/Bad[A-Za-z]+/) || ["error"])[0];
+    }
+    await client.disconnect().catch(() => {});
+    process.stdout.write(`REFUSED ${status}\n`);
+    const deadline = Date.now() + 30000;
+    while (!fs.existsSync(waitFile)) {
+        if (Date.now() > deadline) throw new Error(`${waitFile} did not appear`);
+        await new Promise((resolve) => setTimeout(resolve, 20));
+    }
+}
+
 async function main() {
-    const [endpoint, userName, password, mode, certificateFile, privateKeyFile, applicationUri] = process.argv.slice(2);
+    const [endpoint, userName, password, mode, certificateFile, privateKeyFile, applicationUri, waitFile] = process.argv.slice(2);
     const secure = mode === "SignAndEncrypt";
-    const client = OPCUAClient.create({
+    const options = {
         applicationName: "softplc-node-check",
         securityMode: secure ? MessageSecurityMode.SignAndEncrypt : MessageSecurityMode.None,
         securityPolicy: secure ? SecurityPolicy.Basic256Sha256 : SecurityPolicy.None,
         ...(secure ? { certificateFile, privateKeyFile, applicationUri } : {}),
         endpointMustExist: false,
-        connectionStrategy: { maxRetry: 1, initialDelay: 100 },
+        connectionStrategy: { maxRetry: 0, initialDelay: 100 },
         requestedSessionTimeout: 30000,
-    });
+    };
+    if (waitFile) {
+        await refusedFirst(options, endpoint, userName, password, waitFile);
+    }
+    const client = OPCUAClient.create(options);
     const out = {};
     await client.connect(endpoint);
     const session = await client.createSession({ type: UserTokenType.UserName, userName, password });
