@@ -92,3 +92,20 @@ async def test_subscribed_client_vanishing_without_goodbye_stalls_nothing(plant)
         await asyncio.wait_for(vanishing.disconnect(), 2)
     except Exception:
         pass
+
+
+async def test_register_server_is_refused_without_a_session(plant) -> None:
+    _, server = plant
+    client = client_for(server, timeout=2)
+    await client.connect_socket()
+    try:
+        await client.send_hello()
+        await client.open_secure_channel()
+        registered = ua.RegisteredServer(ServerUri="urn:intruder", IsOnline=True, DiscoveryUrls=["opc.tcp://evil:4840"])
+        with pytest.raises(ua.UaStatusCodeError) as refused:
+            await client.uaclient.register_server(registered)
+        assert refused.value.code == ua.StatusCodes.BadServiceUnsupported
+        servers = await client.find_servers()
+        assert all(entry.ApplicationUri != "urn:intruder" for entry in servers)
+    finally:
+        client.disconnect_socket()

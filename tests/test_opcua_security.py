@@ -131,3 +131,4 @@ async def test_a_none_channel_serves_discovery_only_when_none_is_not_offered(sec
         assert refused.value.code == ua.StatusCodes.BadSecurityPolicyRejected
     finally:
         client.disconnect_socket()
+

@@ -1,6 +1,6 @@
 """The network side of the server, hardened: asyncua's binary server with stricter framing and policies.
 
-asyncua 2.1.0 (pinned) leaves three gaps this module closes, by subclassing its server classes:
+asyncua 2.1.0 (pinned) leaves gaps this module closes, by subclassing its server classes:
 
 - A client may use a SecurityPolicy None channel for sessions even when None is not offered
   (the channel falls back to asyncua's initial None policy). Here a None channel that was not
@@ -11,8 +11,13 @@ asyncua 2.1.0 (pinned) leaves three gaps this module closes, by subclassing its 
   until that many bytes arrived. `GuardedProtocol` closes a connection whose frame is bigger
   than the receive buffer agreed in the Hello/Acknowledge, or whose type is not an OPC UA one,
   after sending an ERR message, so junk costs nothing and logs one line.
+- RegisterServer needs no session in asyncua: anyone could add entries to FindServers. We are
+  not a discovery server, so it is refused (BadServiceUnsupported).
 - The certificate of each secured channel is noted (`TrackingPolicyFactory`), so the client
   certificate check knows a secured session from one on a None channel.
+
+Requests bigger than 1 KB, and every subscription publish, also wait for `ScanGuard` (see
+scheduling.py) so they never delay the start of a scan cycle.
 """
 
 from __future__ import annotations
@@ -52,6 +57,12 @@ _DISCOVERY = frozenset(ua.NodeId(type_id) for type_id in (
 ))
 
 
+_REGISTRATION = frozenset(ua.NodeId(type_id) for type_id in (
+    ua.ObjectIds.RegisterServerRequest_Encoding_DefaultBinary,
+    ua.ObjectIds.RegisterServer2Request_Encoding_DefaultBinary,
+))
+
+
 class DiscoveryOnlyPolicy(SecurityPolicyNone):
     """SecurityPolicy None for a channel that may only discover endpoints."""
 
@@ -80,6 +91,8 @@ class GuardedProcessor(UaProcessor):
     async def _process_message(self, typeid: ua.NodeId, requesthdr: Any, seqhdr: Any, body: Any) -> Any:
         if getattr(self._connection.security_policy, "discovery_only", False) and typeid not in _DISCOVERY:
             raise ServiceError(ua.StatusCodes.BadSecurityPolicyRejected)
+        if typeid in _REGISTRATION:  # we are no discovery server; asyncua would accept them without a session
+            raise ServiceError(ua.StatusCodes.BadServiceUnsupported)
         return await super()._process_message(typeid, requesthdr, seqhdr, body)
 
 
