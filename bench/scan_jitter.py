@@ -8,6 +8,7 @@ Goal (issue 2): the 10 ms task's start latency has p99 <= 1 ms and max <= 5 ms.
 
     .venv/bin/python bench/scan_jitter.py                 # 4 cases x 60 s
     .venv/bin/python bench/scan_jitter.py --seconds 10 --loops asyncio --intervals 10ms
+    .venv/bin/python bench/scan_jitter.py --rt-priority 10    # as softplc run --rt-priority 10
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from softplc.clock import RealClock  # noqa: E402
 from softplc.config import ProgramConfig, TaskConfig, load_config  # noqa: E402
 from softplc.datatypes import DataType  # noqa: E402
 from softplc.durations import format_duration, parse_duration  # noqa: E402
+from softplc.realtime import set_realtime_priority, use_normal_priority_executor  # noqa: E402
 from softplc.runtime import Runtime  # noqa: E402
 from softplc.scan import RestartPolicy  # noqa: E402
 from softplc.tags import TagDef  # noqa: E402
@@ -93,7 +95,9 @@ def _plant(config_path: Path, interval: float):  # -> PlantConfig
     return config
 
 
-async def _measure(config_path: Path, interval: float, seconds: float, loop_name: str, adapters_on: bool, state_dir: Path) -> Result:
+async def _measure(config_path: Path, interval: float, seconds: float, loop_name: str, adapters_on: bool, state_dir: Path, realtime: bool) -> Result:
+    if realtime:
+        use_normal_priority_executor(asyncio.get_running_loop())
     config = _plant(config_path, interval)
     runtime = Runtime(config, RealClock(), state_dir=state_dir)
     if adapters_on:
@@ -128,14 +132,14 @@ async def _measure(config_path: Path, interval: float, seconds: float, loop_name
     return Result(loop_name, interval, cycles, overruns, np.frombuffer(latency) * 1e3, np.frombuffer(scan) * 1e3, described)
 
 
-def run_case(config_path: Path, interval: float, seconds: float, loop_name: str, adapters_on: bool, state_dir: Path) -> Result:
+def run_case(config_path: Path, interval: float, seconds: float, loop_name: str, adapters_on: bool, state_dir: Path, realtime: bool = False) -> Result:
     factory = None
     if loop_name == "uvloop":
         import uvloop
 
         factory = uvloop.new_event_loop
     with asyncio.Runner(loop_factory=factory) as runner:
-        return runner.run(_measure(config_path, interval, seconds, loop_name, adapters_on, state_dir))
+        return runner.run(_measure(config_path, interval, seconds, loop_name, adapters_on, state_dir, realtime))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -146,17 +150,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", type=Path, default=REPO / "tagdb.yaml", help="plant (default tagdb.yaml)")
     parser.add_argument("--no-adapters", action="store_true", help="scan only: start no server or fleet")
     parser.add_argument("--state-dir", type=Path, default=Path("/tmp/softplc-bench-state"))
+    parser.add_argument("--rt-priority", type=int, metavar="N", help="SCHED_FIFO priority, as softplc run --rt-priority")
     args = parser.parse_args(argv)
+    if args.rt_priority is not None:
+        set_realtime_priority(args.rt_priority)
     intervals = [parse_duration(text) for text in args.intervals.split(",")]
     loops = [name.strip() for name in args.loops.split(",")]
 
-    print(f"scan jitter: {args.config.name}, {args.seconds:g} s per case after {WARMUP_S:g} s warm-up; "
+    mode = f"SCHED_FIFO priority {args.rt_priority}" if args.rt_priority is not None else "normal scheduling"
+    print(f"scan jitter: {args.config.name}, {args.seconds:g} s per case after {WARMUP_S:g} s warm-up, {mode}; "
           f"Python {platform.python_version()}, {platform.machine()}, {len(__import__('os').sched_getaffinity(0))} CPUs")
     results: list[Result] = []
     for loop_name in loops:
         for interval in intervals:
             started = time.monotonic()
-            result = run_case(args.config, interval, args.seconds, loop_name, not args.no_adapters, args.state_dir)
+            result = run_case(args.config, interval, args.seconds, loop_name, not args.no_adapters, args.state_dir,
+                              args.rt_priority is not None)
             results.append(result)
             print(f"  {loop_name:7} {format_duration(interval):>5}: {result.cycles} cycles, "
                   f"{time.monotonic() - started:.0f} s", flush=True)

@@ -87,6 +87,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--loop", choices=("asyncio", "uvloop"), default="asyncio",
         help="event loop: asyncio (default) or uvloop (pip install uvloop; lower scan jitter)",
     )
+    run.add_argument(
+        "--rt-priority", type=int, metavar="N",
+        help="run the scan loop under real-time scheduling (SCHED_FIFO, 1-99) so other processes "
+        "cannot delay it; needs root or CAP_SYS_NICE",
+    )
     from softplc.adapters import add_run_arguments
 
     add_run_arguments(run)
@@ -226,6 +231,14 @@ def cmd_run(args: argparse.Namespace) -> int:
             print("softplc: --loop uvloop needs the uvloop package: pip install uvloop", file=sys.stderr)
             return EXIT_FAILURE
         loop_factory = uvloop.new_event_loop
+    if args.rt_priority is not None:
+        from softplc.realtime import RealtimeError, set_realtime_priority
+
+        try:
+            set_realtime_priority(args.rt_priority)
+        except RealtimeError as error:
+            print(f"softplc: --rt-priority: {error}", file=sys.stderr)
+            return EXIT_FAILURE
     clock = SimClock(speed=args.speed) if args.sim else RealClock()
     runtime = Runtime(config, clock, state_dir=args.state_dir)
     for adapter in build_adapters(config, args):
@@ -234,6 +247,10 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     async def main_async() -> str:
         loop = asyncio.get_running_loop()
+        if args.rt_priority is not None:
+            from softplc.realtime import use_normal_priority_executor
+
+            use_normal_priority_executor(loop)
         interrupts = 0
 
         def interrupt() -> None:

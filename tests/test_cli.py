@@ -300,3 +300,22 @@ def test_default_plant_runs_600_simulated_seconds(tmp_path: Path) -> None:
 def test_plant_file_is_dedented() -> None:
     # guards the PLANT text above: YAML indentation is significant
     assert textwrap.dedent(PLANT) == PLANT
+
+
+def test_rt_priority_out_of_range_is_a_clear_error(tmp_path: Path, plant: Path) -> None:
+    result = subprocess.run([SOFTPLC, "run", str(plant), "--rt-priority", "500", "--duration", "0.1"],
+                            capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == 1
+    assert result.stderr.strip() == "softplc: --rt-priority: the real-time priority must be between 1 and 99, not 500"
+
+
+def test_rt_priority_runs_or_says_why_not(tmp_path: Path, plant: Path) -> None:
+    result = subprocess.run(
+        [SOFTPLC, "run", str(plant), "--rt-priority", "5", "--duration", "0.3", "--state-dir", str(tmp_path), "--no-status"],
+        capture_output=True, text=True, timeout=60, cwd=tmp_path,
+    )
+    if result.returncode == 1:  # without root or CAP_SYS_NICE: refused with the remedy
+        assert "softplc: --rt-priority: not permitted to use real-time scheduling" in result.stderr
+    else:
+        assert result.returncode == 0, result.stderr
+        assert "stopped: duration of 0.3 s reached" in result.stderr
