@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import datetime
 import textwrap
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
@@ -12,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from asyncua import Client, ua
+from asyncua import Client
 from asyncua.crypto.cert_gen import dump_private_key_as_pem, generate_private_key, generate_self_signed_app_certificate
 from cryptography import x509
 from cryptography.hazmat.primitives import serialization
@@ -24,41 +23,39 @@ from softplc.config import load_config
 from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.runtime import Runtime
 
-HERE = Path(__file__).resolve().parent
-
 PASSWORDS = {"viewer": "viewer-pass-1", "operator": "operator-pass-1", "engineer": "engineer-pass-1"}
 
-PLANT = f"""
+PLANT = """
 version: 1
-plant: {{name: opcua-test}}
+plant: {name: opcua-test}
 templates:
   robot:
     group: Robots
     instances: [r01, r02]
     tags:
-      xpos:   {{type: float64, unit: m, access: ro, description: x position}}
-      xgoal:  {{type: float64, unit: m, min: 0, max: 21.95, description: x goal}}
-      status: {{type: bool, description: busy}}
+      xpos:   {type: float64, unit: m, access: ro, description: x position}
+      xgoal:  {type: float64, unit: m, min: 0, max: 21.95, description: x goal}
+      status: {type: bool, description: busy}
 tags:
-  b1:      {{type: bool}}
-  i16:     {{type: int16, min: -100, max: 100, unit: "%", description: a bounded int16}}
-  u16:     {{type: uint16}}
-  i32:     {{type: int32}}
-  u32:     {{type: uint32}}
-  f32:     {{type: float32, min: 0, max: 10, unit: m/s}}
-  f64:     {{type: float64}}
-  s1:      {{type: string, initial: hello}}
-  ro_i32:  {{type: int32, access: ro, initial: 7, description: read-only for clients}}
-  count:   {{type: uint32, access: ro, description: scans of the fast task}}
-  request: {{type: int32, description: written by clients}}
-  reply:   {{type: int32, access: ro, description: the program's echo of request}}
+  b1:      {type: bool}
+  i16:     {type: int16, min: -100, max: 100, unit: "%", description: a bounded int16}
+  u16:     {type: uint16}
+  i32:     {type: int32}
+  u32:     {type: uint32}
+  f32:     {type: float32, min: 0, max: 10, unit: m/s}
+  f64:     {type: float64}
+  s1:      {type: string, initial: hello}
+  ro_i32:  {type: int32, access: ro, initial: 7, description: read-only for clients}
+  count:   {type: uint32, access: ro, description: scans of the fast task}
+  request: {type: int32, description: written by clients}
+  reply:   {type: int32, access: ro, description: the program's echo of request}
 tasks:
   fast:
     interval: 10ms
     programs:
       - name: ticker
         program: tests.opcua_support:Ticker
-        bind: {{count: count, request: request, reply: reply}}
+        bind: {count: count, request: request, reply: reply}
 """
 
 
@@ -151,10 +148,3 @@ def make_client_certificate(directory: Path, name: str = "test-client") -> Clien
     key_path.write_bytes(dump_private_key_as_pem(key))
     pem_path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
     return ClientCertificate(cert_path, key_path, uri, der, pem_path)
-
-
-def node(client: Client, ns: int, tag: str) -> Any:
-    return client.get_node(ua.NodeId(tag, ns))
-
-
-NOW = datetime.datetime.now

@@ -3,8 +3,6 @@ subscriptions, quality. One plant (real time, 10 ms task) is shared by the modul
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 import pytest_asyncio
 from asyncua import ua

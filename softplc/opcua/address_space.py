@@ -166,7 +166,9 @@ class AddressSpaceBuilder:
                 self._descriptions[text] = attribute
         return attribute
 
-    def _base_node(self, node_id: ua.NodeId, name: str, description: str, node_class: ua.NodeClass, browse_ns: int | None = None) -> NodeData:
+    def _base_node(
+        self, node_id: ua.NodeId, name: str, description: str, node_class: ua.NodeClass, browse_ns: int | None = None
+    ) -> NodeData:
         node = NodeData(node_id)
         qualified = ua.QualifiedName(name, self.ns if browse_ns is None else browse_ns)
         zero_mask = self._shared(0, ua.VariantType.UInt32)
@@ -233,14 +235,17 @@ class AddressSpaceBuilder:
         type_definition = _ANALOG_ITEM_TYPE if has_range else _BASE_ANALOG_TYPE if has_unit and numeric else _BASE_VARIABLE_TYPE
         self._link(parent, node, _ORGANIZES, ua.NodeClass.Variable, type_definition)
         self.values[definition.name] = value
+        extension = ua.VariantType.ExtensionObject
         if has_range:
-            self._add_property(node, definition.name, "EURange", ua.Variant(eu_range(definition), ua.VariantType.ExtensionObject), _RANGE)
+            self._add_property(node, definition.name, "EURange", ua.Variant(eu_range(definition), extension), _RANGE)
         if has_unit:
-            self._add_property(node, definition.name, "EngineeringUnits", ua.Variant(eu_information(definition.unit), ua.VariantType.ExtensionObject), _EU_INFORMATION)
+            units = ua.Variant(eu_information(definition.unit), extension)
+            self._add_property(node, definition.name, "EngineeringUnits", units, _EU_INFORMATION)
 
     def _add_property(self, owner: NodeData, tag_name: str, name: str, value: ua.Variant, data_type: ua.NodeId) -> None:
         node = self._base_node(ua.NodeId(f"{tag_name}/{name}", self.ns), name, "", ua.NodeClass.Variable, browse_ns=0)
-        self._variable_attributes(node, AttributeValue(ua.DataValue(value, SourceTimestamp=self._built, ServerTimestamp=self._built)), data_type, READ)
+        constant = AttributeValue(ua.DataValue(value, SourceTimestamp=self._built, ServerTimestamp=self._built))
+        self._variable_attributes(node, constant, data_type, READ)
         self._link(owner, node, _HAS_PROPERTY, ua.NodeClass.Variable, _PROPERTY_TYPE)
 
 

@@ -123,7 +123,8 @@ def cmd_certs(args: argparse.Namespace) -> int:
         infos = pki.list(directory)
         print(f"\n{label} client certificates ({len(infos)}):")
         if infos:
-            print_table([[i.fingerprint[:16], i.subject, f"{i.not_after:%Y-%m-%d}", i.path.name] for i in infos], ("fingerprint", "subject", "valid until", "file"))
+            rows = [[i.fingerprint[:16], i.subject, f"{i.not_after:%Y-%m-%d}", i.path.name] for i in infos]
+            print_table(rows, ("fingerprint", "subject", "valid until", "file"))
     return EXIT_OK
 
 

@@ -127,7 +127,8 @@ class OpcUaServer:
         assert self.publisher is not None
         self.publisher.run()
         self.startup_seconds = time.perf_counter() - started
-        log.info("OPC UA serving %d tags (%d nodes) on %s, ready in %.2f s", len(runtime.db), self.node_count, self.endpoint, self.startup_seconds)
+        log.info("OPC UA serving %d tags (%d nodes) on %s, ready in %.2f s",
+                 len(runtime.db), self.node_count, self.endpoint, self.startup_seconds)
 
     async def _build_server(self, server: Server, runtime: Runtime) -> None:
         settings = self.settings
@@ -155,7 +156,8 @@ class OpcUaServer:
         anonymous = "anonymous read-only" if settings.anonymous_role is not None else "no anonymous access"
         users = len(self.users.entries()) if self.users is not None else 0
         where = self.users.path if self.users is not None else "users file"
-        return f"OPC UA on {self.endpoint} (ns={self.namespace_index} {self.namespace_uri}; security: {policies}; {anonymous}; {users} users in {where})"
+        namespace = f"ns={self.namespace_index} {self.namespace_uri}"
+        return f"OPC UA on {self.endpoint} ({namespace}; security: {policies}; {anonymous}; {users} users in {where})"
 
     # -- parts of start -------------------------------------------------------------------
 

@@ -200,10 +200,12 @@ def _parse(path: Path) -> dict[str, UserEntry]:
             continue
         role_name = spec.get("role")
         if role_name not in ROLE_NAMES:
-            problems.append(source.problem((*where, "role") if "role" in spec else where, f"user '{name}': role must be one of {', '.join(ROLE_NAMES)}"))
+            at = (*where, "role") if "role" in spec else where
+            problems.append(source.problem(at, f"user '{name}': role must be one of {', '.join(ROLE_NAMES)}"))
             continue
         password, certificate = spec.get("password"), spec.get("certificate")
-        if not isinstance(password, (str, type(None))) or not isinstance(certificate, (str, type(None))) or (password is None and certificate is None):
+        texts = all(isinstance(item, (str, type(None))) for item in (password, certificate))
+        if not texts or (password is None and certificate is None):
             problems.append(source.problem(where, f"user '{name}' needs a password hash (softplc users add) or a certificate fingerprint"))
             continue
         users[str(name)] = UserEntry(str(name), Role(role_name), password, normalise_fingerprint(certificate) if certificate else None)
@@ -225,7 +227,9 @@ class SoftplcUserManager(UserManager):
         self._remembered: dict[bytes, tuple[str, str | None]] = {}  # HMAC → (name, hash it matched)
         self._failures: deque[float] = deque()
 
-    def get_user(self, iserver: Any, username: str | None = None, password: str | None = None, certificate: Any = None) -> SessionUser | None:
+    def get_user(
+        self, iserver: Any, username: str | None = None, password: str | None = None, certificate: Any = None
+    ) -> SessionUser | None:
         self.store.refresh()
         if username:
             return self._password_login(username, password or "")

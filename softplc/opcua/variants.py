@@ -145,6 +145,7 @@ def value_from_variant(definition: TagDef, variant: ua.Variant | None) -> Any:
             raise WriteStatus(ua.StatusCodes.BadOutOfRange, f"{result} does not fit Float")
         single = struct.unpack("f", struct.pack("f", result))[0]
         if single != result:
-            raise WriteStatus(ua.StatusCodes.BadTypeMismatch, f"{vtype.name} {result!r} is not exactly representable as Float; write a Float")
+            detail = f"{vtype.name} {result!r} is not exactly representable as Float; write a Float"
+            raise WriteStatus(ua.StatusCodes.BadTypeMismatch, detail)
         result = single
     return result
