@@ -64,7 +64,6 @@ TASK_TAGS: dict[str, dict[str, Any]] = {
 }
 
 PLANT_INTERVAL = "100ms"
-CONTROL_INTERVAL = "100ms"
 
 
 def robot_tags() -> dict[str, dict[str, Any]]:
@@ -144,8 +143,8 @@ def plant_document(scenario: Scenario, compatible: list[list[int]]) -> dict[str,
         },
         "tags": {"svm_out": {"type": "uint16", "access": "ro", "description": "task chosen by the SVM (1, 2, ...)"}},
         "tasks": {
-            "plant": {"interval": PLANT_INTERVAL, "priority": 5, "programs": plant_programs},
-            "control": {"interval": CONTROL_INTERVAL, "priority": 6, "programs": [sequencer]},
+            # the plant first, then the robots' sequencers: the thesis's loop (matHand_sim, then robMotion)
+            "plant": {"interval": PLANT_INTERVAL, "priority": 5, "programs": [*plant_programs, sequencer]},
             "dispatch": {"interval": scenario.decision_interval, "priority": 7, "programs": [dispatcher_program(scenario, compatible)]},
         },
     }

@@ -20,7 +20,7 @@ class ProgressBar:
 
     def update(self, fraction: float, text: str = "", *, force: bool = False) -> None:
         now = time.monotonic()
-        if not force and now - self._last < self.period:
+        if not force and fraction < 1.0 and now - self._last < self.period:
             return
         self._last = now
         fraction = min(1.0, max(0.0, fraction))

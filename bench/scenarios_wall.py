@@ -1,0 +1,70 @@
+"""Wall time of every shipped scenario, end to end as a user runs it (goal: <= 10 s each).
+
+    .venv/bin/python bench/scenarios_wall.py [NAME ...] [--repeat N]
+
+Each run is `softplc scenario run NAME --out TMP` in a fresh process: imports, the simulated
+run with the fleet's robots, CSV records, PNG figures and the summary. Prints simulated
+seconds, wall seconds (best of --repeat) and the speed-up over real time; any scenario over
+10 s prints GOAL MISSED. Also checks that two runs wrote byte-identical CSV records.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from softplc.scenarios.spec import builtin_scenarios  # noqa: E402
+
+GOAL_S = 10.0
+
+
+def run_once(name: str, out: Path) -> tuple[float, dict]:
+    started = time.monotonic()
+    done = subprocess.run([sys.executable, "-m", "softplc.cli", "scenario", "run", name, "--out", str(out), "--json"],
+                          capture_output=True, text=True, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
+    wall = time.monotonic() - started
+    if done.returncode != 0:
+        raise SystemExit(f"{name} failed:\n{done.stderr}")
+    return wall, json.loads(done.stdout)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", help="scenario names (default: all shipped)")
+    parser.add_argument("--repeat", type=int, default=2, help="runs per scenario (best wall time counts; default 2)")
+    args = parser.parse_args()
+    names = args.names or [path.stem for path in builtin_scenarios()]
+    print(f"load average at start: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(f"{'scenario':<22} {'sim s':>8} {'wall s':>7} {'x real time':>11}  records identical")
+    missed = 0
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in names:
+            walls, outs = [], []
+            for index in range(max(1, args.repeat)):
+                out = Path(tmp) / f"{name}-{index}"
+                wall, summary = run_once(name, out)
+                walls.append(wall)
+                outs.append(out)
+            identical = all(
+                (outs[0] / f"{kind}_{name}.csv").read_bytes() == (other / f"{kind}_{name}.csv").read_bytes()
+                for other in outs[1:] for kind in ("XY", "LEV", "TSK"))
+            best = min(walls)
+            sim = summary["sim_duration_s"]
+            flag = "" if best <= GOAL_S else f"   GOAL MISSED (> {GOAL_S:g} s)"
+            missed += bool(flag)
+            print(f"{name:<22} {sim:8.1f} {best:7.2f} {sim / best:11.0f}  {'yes' if identical else 'NO'}{flag}")
+    print(f"load average at end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    return 1 if missed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
