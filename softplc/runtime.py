@@ -212,7 +212,7 @@ class Runtime:
             self.system_tags.publish(self.clock.now())
             tick += 1
             if tick % 2 == 0:
-                self._flush_retained()
+                await self._save_retained()
 
     def _after_cycle(self, task: Task) -> None:
         if self._stall is not None:
@@ -275,14 +275,31 @@ class Runtime:
                 self._retain_dirty[tag.name] = tag
 
     def _flush_retained(self) -> None:
+        """Save retained changes now (at shutdown)."""
         if self._retain is None or not self._retain_dirty:
             return
         dirty, self._retain_dirty = self._retain_dirty, {}
         try:
-            self._retain.save({name: (tag.definition.type.value, tag.value) for name, tag in dirty.items()})
+            self._retain.save(_retained_values(dirty))
         except Exception as error:
             log.error("cannot save retained values to %s: %s", self._retain.path, error)
-            self._retain_dirty.update(dirty)
+            self._retain_dirty = {**dirty, **self._retain_dirty}
+
+    async def _save_retained(self) -> None:
+        """Save retained changes off the event loop: the SQLite commit waits for the disk."""
+        if self._retain is None or not self._retain_dirty:
+            return
+        dirty, self._retain_dirty = self._retain_dirty, {}
+        try:
+            await self.clock.run_blocking(self._retain.save, _retained_values(dirty))
+        except Exception as error:
+            log.error("cannot save retained values to %s: %s", self._retain.path, error)
+            self._retain_dirty = {**dirty, **self._retain_dirty}  # newer changes win
+
+
+def _retained_values(tags: dict[str, Tag]) -> dict[str, tuple[str, Any]]:
+    # Taken on the loop thread, so the saving thread never reads a tag while it changes.
+    return {name: (tag.definition.type.value, tag.value) for name, tag in tags.items()}
 
 
 async def _quietly(coroutine: Coroutine[Any, Any, Any], name: str) -> None:

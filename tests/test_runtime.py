@@ -423,3 +423,36 @@ async def test_numpy_outputs_are_stored_as_python_values(sim_runtime) -> None:
     assert runtime.program("np").state.value == "RUNNING", runtime.program("np").error
     values = [runtime.db.value(name) for name in ("label", "flag", "level")]
     assert values == [1, True, 0.25] and [type(v) for v in values] == [int, bool, float]
+
+
+async def test_retained_values_are_saved_in_the_background_on_the_real_clock(make_config, tmp_path: Path) -> None:
+    import asyncio
+    import threading
+    import time
+
+    from softplc.clock import RealClock
+
+    state = tmp_path / "real-state"
+    runtime = Runtime(make_config(RETAIN), RealClock(), state_dir=state)
+    saved_by: list[str] = []
+    store_save = None
+    await runtime.start()
+    try:
+        assert runtime._retain is not None
+        store_save = runtime._retain.save
+
+        def recording_save(values: dict) -> None:
+            saved_by.append(threading.current_thread().name)
+            store_save(values)
+
+        runtime._retain.save = recording_save  # type: ignore[method-assign]
+        runtime.db.submit([("setpoint", 7.5)], "operator")
+        deadline = time.monotonic() + 10
+        while not saved_by:  # flushed once a second
+            assert time.monotonic() < deadline, "retained values were never saved"
+            await asyncio.sleep(0.02)
+        assert saved_by[0] != threading.main_thread().name  # the disk wait is off the event loop
+    finally:
+        await runtime.stop()
+    with sqlite3.connect(state / "retain.sqlite") as connection:
+        assert dict(connection.execute("SELECT name, value FROM retain").fetchall())["setpoint"] == "7.5"
