@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from asyncua import Client, ua  # noqa: E402
 
-from opcua_common import PASSWORD, USER, changing_tags, goal, percentile, plant_yaml, start_server, task_latency  # noqa: E402
+from opcua_common import PASSWORD, USER, changing_tags, goal, on_publish, percentile, plant_yaml, start_server, task_latency  # noqa: E402
 
 DELIVERY_GOAL_MS = 5.0
 LATENCY_GOAL_MS = 1.0
@@ -45,9 +45,12 @@ class Delivery:
     def __init__(self) -> None:
         self.delays: list[float] = []
 
-    def datachange_notification(self, node, value, data) -> None:
+    def datachange_notification(self, node, value, data) -> None:  # only until on_publish takes over
+        pass
+
+    def item(self, notification) -> None:
         arrived = time.time()
-        stamp = data.monitored_item.Value.SourceTimestamp
+        stamp = notification.Value.SourceTimestamp
         if stamp is not None:
             self.delays.append(arrived - stamp.timestamp())
 
@@ -94,6 +97,7 @@ async def run(endpoint: str, count: int, seconds: float, changing: list[str]) ->
         for period in (0, 10):
             handler = Delivery()
             subscription = await client.create_subscription(period, handler)
+            on_publish(client, subscription, handler.item)
             await subscription.subscribe_data_change([client.get_node(ua.NodeId(changing[0], ns))], queuesize=100)
             await asyncio.sleep(0.5)
             handler.delays.clear()

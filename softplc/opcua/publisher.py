@@ -21,7 +21,7 @@ from asyncua import ua
 from asyncua.server.address_space import AddressSpace
 
 from softplc.opcua.scheduling import ScanGuard
-from softplc.opcua.variants import data_value
+from softplc.opcua.variants import VARIANT_TYPES, tag_data_value
 from softplc.tagdb import TagDatabase
 from softplc.tags import Tag
 
@@ -47,6 +47,7 @@ class Publisher:
         self.node_ids = node_ids
         self.guard = guard or ScanGuard()
         self.slice_seconds = slice_seconds
+        self._variant_types = {name: VARIANT_TYPES[db[name].definition.type] for name in node_ids}
         self.pushed = 0  # values written into the address space so far
         self._pending: dict[str, Tag] = {}
         self._wake = asyncio.Event()
@@ -101,10 +102,11 @@ class Publisher:
             batch, self._pending = self._pending, {}
             write = self.aspace.write_attribute_value
             node_ids = self.node_ids
+            variant_types = self._variant_types
             await self.guard.clear()
             slice_end = time.perf_counter() + self.slice_seconds
             for count, (name, tag) in enumerate(batch.items(), 1):
-                dv = data_value(tag.definition, tag.value, tag.quality, tag.timestamp)
+                dv = tag_data_value(tag.value, variant_types[name], tag.quality, tag.timestamp)
                 await write(node_ids[name], _VALUE, dv)
                 if count & 3 == 0 and time.perf_counter() > slice_end:
                     await asyncio.sleep(0)

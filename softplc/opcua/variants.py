@@ -96,13 +96,18 @@ def timestamp(epoch_seconds: float) -> datetime:
 
 def data_value(definition: TagDef, value: Any, quality: Quality, epoch_seconds: float) -> ua.DataValue:
     """The DataValue served for a tag: value, StatusCode from quality, source = server timestamp."""
+    return tag_data_value(value, VARIANT_TYPES[definition.type], quality, epoch_seconds)
+
+
+_GOOD = STATUS_CODES[Quality.GOOD]
+
+
+def tag_data_value(value: Any, variant_type: ua.VariantType, quality: Quality, epoch_seconds: float) -> TagDataValue:
+    """`data_value` for the hot path: the variant type looked up once per tag by the caller."""
     stamp = timestamp(epoch_seconds)
-    return TagDataValue(
-        ua.Variant(value, VARIANT_TYPES[definition.type]),
-        StatusCode=STATUS_CODES[quality],
-        SourceTimestamp=stamp,
-        ServerTimestamp=stamp,
-    )
+    status = _GOOD if quality is Quality.GOOD else STATUS_CODES[quality]
+    # Positional, with is_array given: skips the Variant's type guessing (~1 µs of ~2).
+    return TagDataValue(ua.Variant(value, variant_type, None, False), status, stamp, stamp)
 
 
 def value_from_variant(definition: TagDef, variant: ua.Variant | None) -> Any:
