@@ -5,8 +5,8 @@ asyncua client (this process, SecurityPolicy None, user with the operator role) 
 
 - read: `read_value` of one tag; read x100: one Read of 100 tags;
 - write: `write_value` of one tag (answered once validated and journaled);
-- write-to-visible: a write until a read returns the new value (applied at the next cycle
-  boundary of the 10 ms task, so ~5 ms on average by design);
+- write-to-visible: a write (at a random phase of the cycle) until a read returns the new
+  value (applied at the next cycle boundary of the 10 ms task, so ~5 ms on average by design);
 - delivery: subscription notification arrival (client wall clock) minus the tag's source
   timestamp (when the scan committed the change, server wall clock; same machine), for a
   subscription with publishing interval 0 (publish as soon as a change is queued) and 10 ms.
@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import random
 import sys
 import tempfile
 import time
@@ -88,6 +89,9 @@ async def run(endpoint: str, count: int, seconds: float, changing: list[str]) ->
         samples = []
         for index in range(max(10, count // 5)):
             value = 1_000_000 + index
+            # A random phase: otherwise each write follows the cycle that made the last one
+            # visible, and always waits almost a whole interval.
+            await asyncio.sleep(random.uniform(0, 0.01))
             started = time.perf_counter()
             await target.write_value(ua.Variant(value, ua.VariantType.Int32))
             while await target.read_value() != value:

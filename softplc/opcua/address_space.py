@@ -63,6 +63,7 @@ class _Folder:
     path: str  # "/Plant/Robots/r01"
     name: str
     children: list[_Folder | TagDef] = field(default_factory=list)
+    span: tuple[str, str] | None = None  # a chunk folder: names of its first and last leaf
     index: dict[str, _Folder] = field(default_factory=dict)
 
     def folder(self, name: str) -> _Folder:
@@ -74,8 +75,12 @@ class _Folder:
         return child
 
 
-def _child_name(child: _Folder | TagDef) -> str:
-    return child.name
+def _first(child: _Folder | TagDef) -> str:
+    return child.span[0] if isinstance(child, _Folder) and child.span else child.name
+
+
+def _last(child: _Folder | TagDef) -> str:
+    return child.span[1] if isinstance(child, _Folder) and child.span else child.name
 
 
 def plan_folders(definitions: Iterable[TagDef], folder_size: int) -> list[_Folder]:
@@ -104,8 +109,9 @@ def _split(folder: _Folder, size: int) -> None:
         chunks = [folder.children[i:i + size] for i in range(0, len(folder.children), size)]
         grouped: list[_Folder | TagDef] = []
         for chunk in chunks:
-            name = f"{_child_name(chunk[0])}..{_child_name(chunk[-1])}"
-            part = _Folder(f"{folder.path}/{name}", name, list(chunk))
+            span = (_first(chunk[0]), _last(chunk[-1]))
+            name = f"{span[0]}..{span[1]}"
+            part = _Folder(f"{folder.path}/{name}", name, list(chunk), span=span)
             grouped.append(part)
         folder.children = grouped
 

@@ -149,6 +149,8 @@ class OpcUaServer:
         if self.server is not None:
             await _quiet_stop(self.server)
             self.server = None
+            # Let the collector have the stopped server's nodes back (a pause no longer matters).
+            gc.unfreeze()
 
     def describe(self) -> str:
         settings = self.settings
