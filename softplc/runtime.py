@@ -79,6 +79,7 @@ class Runtime:
         self._retain: RetainStore | None = None
         self._retain_dirty: dict[str, Tag] = {}
         self._started = False
+        self._drive: asyncio.Task[Any] | None = None
 
     def _build_task(self, task: Any) -> Task:
         instances = []
@@ -139,8 +140,6 @@ class Runtime:
         self._load_retained()
         self.engine.start_programs()
         self.system_tags.publish(self.clock.now())
-        if isinstance(self.clock, SimClock):
-            self.spawn(self.clock.drive(), "sim-clock")
         started: list[Adapter] = []
         try:
             for adapter in self.adapters:
@@ -152,6 +151,10 @@ class Runtime:
             await self._cancel_background()
             raise
         self.state = RuntimeState.RUNNING
+        if isinstance(self.clock, SimClock):
+            # Simulated time starts only now: adapters take real time to start (OPC UA ~2 s),
+            # and robots started meanwhile must not run ahead of the plant.
+            self._drive = self.spawn(self.clock.drive(), "sim-clock")
         self.spawn(self.engine.run(), "scan-engine")
         self.spawn(self._housekeeping(), "housekeeping")
         self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after())
@@ -163,6 +166,10 @@ class Runtime:
             return
         self.state = RuntimeState.STOPPING
         self.engine.stop()
+        if self._drive is not None:
+            # Simulated time ends here: while adapters stop (real I/O, ~1 s for OPC UA) the idle
+            # clock would otherwise race ahead and keep robots and housekeeping going.
+            self._drive.cancel()
         if self._stall_detector is not None:
             self._stall_detector.stop()
         for adapter in reversed(self.adapters):

@@ -456,3 +456,60 @@ async def test_retained_values_are_saved_in_the_background_on_the_real_clock(mak
         await runtime.stop()
     with sqlite3.connect(state / "retain.sqlite") as connection:
         assert dict(connection.execute("SELECT name, value FROM retain").fetchall())["setpoint"] == "7.5"
+
+
+async def test_simulated_time_stops_with_the_runtime(sim_runtime) -> None:
+    """Stopping adapters takes real time; the simulated clock must not run on meanwhile."""
+    import asyncio
+
+    class SlowToStop:
+        name = "slow"
+
+        async def start(self, runtime: Runtime) -> None:
+            pass
+
+        async def stop(self) -> None:
+            await asyncio.sleep(0.2)  # real I/O, e.g. a server closing its sockets
+
+        def describe(self) -> str:
+            return "slow to stop"
+
+    runtime = sim_runtime(FAULTS)
+    runtime.add_adapter(SlowToStop())
+    published: list[float] = []
+    runtime.db.on_change(lambda tags: published.extend(t.value for t in tags if t.name == "_sys.time"))
+    await runtime.run(duration=3.0)
+    assert runtime.clock.now() == 3.0
+    assert max(published) <= 3.0
+
+
+async def test_simulated_time_starts_when_every_adapter_has_started(sim_runtime) -> None:
+    import asyncio
+
+    class SlowToStart:
+        name = "slow"
+
+        def __init__(self) -> None:
+            self.woke_at: float | None = None
+
+        async def start(self, runtime: Runtime) -> None:
+            runtime.spawn(self._background(runtime), "slow-background")
+            await asyncio.sleep(0.2)  # real I/O, e.g. building an OPC UA address space
+
+        async def _background(self, runtime: Runtime) -> None:
+            await runtime.clock.sleep(1.0)  # e.g. a robot's control loop
+            self.woke_at = runtime.clock.now()
+
+        async def stop(self) -> None:
+            pass
+
+        def describe(self) -> str:
+            return "slow to start"
+
+    runtime = sim_runtime(FAULTS)
+    adapter = SlowToStart()
+    runtime.add_adapter(adapter)
+    await runtime.run(duration=2.0)
+    assert adapter.woke_at == 1.0
+    assert runtime.tasks[0].stats.cycles == 200  # the plant scanned from t = 0
+    assert runtime.program("count").program.times[0] == 0.0
