@@ -513,3 +513,30 @@ async def test_simulated_time_starts_when_every_adapter_has_started(sim_runtime)
     assert adapter.woke_at == 1.0
     assert runtime.tasks[0].stats.cycles == 200  # the plant scanned from t = 0
     assert runtime.program("count").program.times[0] == 0.0
+
+
+async def test_identical_histories_with_the_default_plants_robots(tmp_path: Path) -> None:
+    """The default plant with the adapters `softplc run --sim --no-servers` starts (the robots)."""
+    import argparse
+
+    from softplc.adapters import build_adapters
+
+    histories = []
+    for run in range(2):
+        config = load_config(REPO / "tagdb.yaml")
+        runtime = Runtime(config, SimClock(), state_dir=tmp_path / f"state{run}")
+        for adapter in build_adapters(config, argparse.Namespace(no_servers=True)):
+            runtime.add_adapter(adapter)
+        history = _history(runtime)
+        await runtime.start()
+        try:
+            await runtime.clock.sleep_until(1.0)  # a client sends r01 to task 1's source
+            source = (config.tag("t01_src_x").initial, config.tag("t01_src_y").initial)
+            assert runtime.db.submit([("r01_xgoal", source[0]), ("r01_ygoal", source[1]), ("r01_status", True)], "client") == [None] * 3
+            await runtime.clock.sleep_until(40.0)
+        finally:
+            await runtime.stop()
+        histories.append(history)
+    first, second = histories
+    assert any(name == "r01_xpos" for _, name, _ in first), "the robot never moved"
+    assert first == second
