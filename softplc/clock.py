@@ -123,6 +123,8 @@ class RealClock(Clock):
             # Learn how late the loop's timers fire; forget a spike slowly (2 % per wake-up).
             self._lateness = max(self.now() - target, self._lateness * 0.98)
             self.spin = min(max(self._lateness + _SPIN_MARGIN, _SPIN_MARGIN), self.max_spin)
+        elif remaining <= 0:
+            await asyncio.sleep(0)  # always give the loop a turn, as SimClock and asyncio.sleep(0) do
         while self.now() < deadline:
             await asyncio.sleep(0)
 

@@ -171,3 +171,16 @@ async def test_real_clock_spin_adapts_to_the_loops_timer_lateness() -> None:
     for _ in range(5):
         await clock.sleep(0.006)
     assert 0.0005 <= clock.spin <= 0.004
+
+
+async def test_a_zero_sleep_on_the_real_clock_lets_others_run() -> None:
+    clock = RealClock()
+    ran = []
+
+    async def other() -> None:
+        ran.append(True)
+
+    task = asyncio.create_task(other())
+    await clock.sleep(0)
+    assert ran == [True]
+    await task
