@@ -7,20 +7,16 @@ import textwrap
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from asyncua import Client
-from asyncua.crypto.cert_gen import dump_private_key_as_pem, generate_private_key, generate_self_signed_app_certificate
-from cryptography import x509
-from cryptography.hazmat.primitives import serialization
-from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from softplc import InOut, Input, Output, Program
 from softplc.clock import RealClock
 from softplc.config import load_config
 from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
+from softplc.opcua.client import ClientCertificate, ensure_client_certificate, pem_certificate
 from softplc.runtime import Runtime
 
 PASSWORDS = {"viewer": "viewer-pass-1", "operator": "operator-pass-1", "engineer": "engineer-pass-1"}
@@ -125,26 +121,8 @@ async def wait_until(condition: Callable[[], Awaitable[bool] | bool], timeout: f
         await asyncio.sleep(interval)
 
 
-@dataclass
-class ClientCertificate:
-    certificate: Path  # DER
-    key: Path  # PEM
-    uri: str
-    der: bytes
-    pem: Path  # the certificate again, as PEM
-
-
 def make_client_certificate(directory: Path, name: str = "test-client") -> ClientCertificate:
-    """A self-signed OPC UA client application certificate (DER) and key (PEM)."""
-    key = generate_private_key()
-    uri = f"urn:softplc:test:{name}"
-    certificate = generate_self_signed_app_certificate(
-        key, name, {}, [x509.UniformResourceIdentifier(uri), x509.DNSName("localhost")],
-        extended=[ExtendedKeyUsageOID.CLIENT_AUTH], days=30,
-    )
-    der = certificate.public_bytes(serialization.Encoding.DER)
-    cert_path, key_path, pem_path = directory / f"{name}.der", directory / f"{name}.key.pem", directory / f"{name}.cert.pem"
-    cert_path.write_bytes(der)
-    key_path.write_bytes(dump_private_key_as_pem(key))
-    pem_path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
-    return ClientCertificate(cert_path, key_path, uri, der, pem_path)
+    """A self-signed OPC UA client certificate (DER + PEM key; also NAME.cert.pem for node-opcua)."""
+    certificate = ensure_client_certificate(directory, name, days=30)
+    (directory / f"{name}.cert.pem").write_bytes(pem_certificate(certificate))
+    return certificate

@@ -67,7 +67,8 @@ async def test_node_opcua_over_sign_and_encrypt_after_its_certificate_is_trusted
     async with running_plant(tmp_path, security=("Basic256Sha256_SignAndEncrypt",), anonymous="off") as (runtime, server):
         process = await asyncio.create_subprocess_exec(
             node, "opcua_check.js", server.endpoint, "operator", PASSWORDS["operator"],
-            "SignAndEncrypt", str(certificate.pem), str(certificate.key), certificate.uri, str(trusted_flag),
+            "SignAndEncrypt", str(tmp_path / "node-opcua-client.cert.pem"), str(certificate.private_key), certificate.application_uri,
+            str(trusted_flag),
             cwd=NODE_DIR, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
         )
         assert process.stdout is not None

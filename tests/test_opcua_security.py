@@ -12,12 +12,12 @@ from pathlib import Path
 import pytest
 import pytest_asyncio
 from asyncua import Client, ua
-from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 
 from softplc.opcua import Role, UserStore
 from softplc.opcua.security import fingerprint
 from tests.conftest import REPO
-from tests.opcua_support import client_for, make_client_certificate, running_plant, wait_until
+from softplc.opcua.client import make_client
+from tests.opcua_support import PASSWORDS, client_for, make_client_certificate, running_plant, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 
@@ -32,10 +32,9 @@ async def secure(tmp_path_factory: pytest.TempPathFactory):
 
 
 async def _secured(server, certificate, mode, user: str | None = "operator", password: str | None = None) -> Client:
-    client = client_for(server, user, password)
-    client.application_uri = certificate.uri
-    await client.set_security(SecurityPolicyBasic256Sha256, str(certificate.certificate), str(certificate.key), mode=mode)
-    return client
+    security = "Basic256Sha256_Sign" if mode == SIGN else "Basic256Sha256_SignAndEncrypt"
+    return await make_client(server.endpoint, user=user, password=password if password is not None else (PASSWORDS[user] if user else None),
+                             certificate=certificate, security=security)
 
 
 def _cli(directory: Path, *arguments: str) -> subprocess.CompletedProcess[str]:
@@ -105,9 +104,7 @@ async def test_a_certificate_can_log_a_user_in(secure) -> None:
     certificate = make_client_certificate(directory, "robot-agent")
     assert _cli(directory, "opcua", "trust", str(certificate.certificate)).returncode == 0
     UserStore(directory / "state" / "users.yaml").add("robot7", Role.ENGINEER, certificate=fingerprint(certificate.der))
-    client = await _secured(server, certificate, ENCRYPT, user=None)
-    await client.load_client_certificate(str(certificate.certificate))
-    await client.load_private_key(str(certificate.key))
+    client = await make_client(server.endpoint, certificate=certificate, security="Basic256Sha256_SignAndEncrypt", login_with_certificate=True)
     async with client:
         ns = await client.get_namespace_index("urn:softplc:tags")
         # An engineer may write the ro tag: proof the certificate mapped to robot7's role.

@@ -13,6 +13,8 @@ Public surface (what other adapters, tools and tests use):
 
 Users and certificates: `softplc.opcua.UserStore(path).add(name, Role.OPERATOR, password)`,
 `softplc.opcua.Pki(state_dir / "pki").trust(certificate_file)` (the CLI does the same).
+Clients (robot agents, tools): `softplc.opcua.make_client(endpoint, user=…, password=…,
+certificate=ensure_client_certificate(dir, name), security="Basic256Sha256_SignAndEncrypt")`.
 """
 
 from __future__ import annotations
