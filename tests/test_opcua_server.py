@@ -242,3 +242,14 @@ async def test_a_client_write_and_the_program_in_the_same_cycle_follow_the_docum
         stop()
     at = seen.index(1_000_000)
     assert seen[at + 1] == 1_000_001  # nothing lost, nothing overwritten
+
+
+async def test_operation_limits_are_advertised_and_enforced(plant, operator) -> None:
+    limits = [ua.ObjectIds.Server_ServerCapabilities_OperationLimits_MaxNodesPerRead, ua.ObjectIds.Server_ServerCapabilities_OperationLimits_MaxNodesPerWrite]
+    per_read, per_write = [await operator.get_node(ua.NodeId(limit)).read_value() for limit in limits]
+    assert (per_read, per_write) == (20_000, 5_000)
+    ns = await _ns(operator)
+    node = operator.get_node(ua.NodeId("i32", ns))
+    with pytest.raises(ua.UaStatusCodeError) as refused:
+        await operator.write_values([node] * (per_write + 1), [ua.Variant(1, ua.VariantType.Int32)] * (per_write + 1))
+    assert refused.value.code == ua.StatusCodes.BadTooManyOperations

@@ -38,7 +38,7 @@ from softplc.opcua.security import ClientCertificateValidator, Pki, SecuredChann
 from softplc.opcua.settings import POLICIES, POLICY_NONE, POLICY_TEXT, OpcUaSettings
 from softplc.opcua.transport import GuardedServer
 from softplc.opcua.users import SoftplcUserManager, UserStore
-from softplc.opcua.writes import TagAttributeService
+from softplc.opcua.writes import MAX_NODES_PER_READ, MAX_NODES_PER_WRITE, TagAttributeService
 from softplc.yamlsource import ConfigError
 
 if TYPE_CHECKING:
@@ -141,6 +141,10 @@ class OpcUaServer:
         iserver.set_attribute_value_callback(
             ua.NodeId(ua.ObjectIds.Server_ServerStatus_CurrentTime), ua.AttributeIds.Value, _current_time
         )
+        # Advertise the request limits the Write service enforces, so clients split big requests.
+        for limit, value in ((ua.ObjectIds.Server_ServerCapabilities_OperationLimits_MaxNodesPerRead, MAX_NODES_PER_READ),
+                             (ua.ObjectIds.Server_ServerCapabilities_OperationLimits_MaxNodesPerWrite, MAX_NODES_PER_WRITE)):
+            await server.get_node(ua.NodeId(limit)).write_value(ua.Variant(value, ua.VariantType.UInt32))
         self.namespace_index = await server.register_namespace(settings.namespace)
         await self._configure_security(server)
         await self._build_address_space(runtime)
