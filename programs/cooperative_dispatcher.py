@@ -19,6 +19,7 @@ class CooperativeDispatcher(TaskWeighting):
 
     def choose(self, robot: int, weights: list[float]) -> int:
         allowed = self.compatible[robot] if robot < len(self.compatible) else []
+        open_tasks = self.open_tasks()
         if len(allowed) == 1:
-            return allowed[0]  # dedicated: stays on its only task
-        return lowest_weight(weights, allowed)
+            return allowed[0] if allowed[0] in open_tasks else 0  # dedicated: stays on its only task
+        return lowest_weight(weights, [task for task in allowed if task in open_tasks])

@@ -11,13 +11,18 @@
 The sequencer only acts while the robot is available: within `reach` (0.3 m) of its goal and
 not busy. It sets `status` (busy) with every new goal; the robot itself clears `status` when
 it arrives. Task coordinates are bound as lists, task number = position + 1.
+
+Beyond the thesis: with `park_after` > 0, a robot left without a task (`tnext` 0) for that
+long drives back to where it started, so it does not stand on a station other robots need
+(the thesis's dispatchers always had a task for every robot). A task arriving meanwhile
+takes over at once.
 """
 
 from __future__ import annotations
 
 import math
 
-from softplc import InOut, Input, Output, Param, Program
+from softplc import TON, InOut, Input, Output, Param, Program
 
 WAITING, TO_SOURCE, AT_SOURCE, TO_DESTINATION, AT_DESTINATION = range(5)
 
@@ -39,19 +44,33 @@ class MotionSequencer(Program):
     dest_y = Input("destination y of every task (tNN_dest_y)")
     goals = InOut("goals issued per task, counted here (tNN_goals)", optional=True)
     reach = Param(0.3, "distance to the goal at which the robot counts as there, m")
+    park_after = Param(0.0, "seconds without a task before the robot drives back to its start (0: never)", duration=True)
+
+    def setup(self) -> None:
+        self.home: tuple[float, float] | None = None
+        self.idle = TON(self.clock)
 
     def scan(self) -> None:
-        if self.status or math.hypot(self.xgoal - self.xpos, self.ygoal - self.ypos) > self.reach:
+        if self.home is None:
+            self.home = (self.xpos, self.ypos)  # where the robot started: its parking place
+        tasks = len(self.src_x)
+        has_task = 1 <= self.tnext <= tasks
+        parking = self.currloc == WAITING and self.status and (self.xgoal, self.ygoal) == self.home
+        available = parking or (not self.status and self.at(self.xgoal, self.ygoal))
+        without_work = available and not parking and self.currloc == WAITING and not has_task
+        park_now = self.idle(IN=without_work and self.park_after > 0, PT=self.park_after)
+        if not available:
             return  # travelling
         before = self.currloc
-        tasks = len(self.src_x)
         if self.currloc == WAITING:
             task = self.tnext
-            if 1 <= task <= tasks:
+            if has_task:
                 self.go(self.src_x[task - 1], self.src_y[task - 1], TO_SOURCE)
                 self.tcurr = task
                 if self.goals is not None:
                     self.goals[task - 1] += 1
+            elif park_now and not self.at(*self.home):
+                self.go(*self.home, WAITING)  # out of the way until there is work
         elif self.currloc in (TO_SOURCE, AT_SOURCE):
             self.currloc = AT_SOURCE
             if self.loadstat and 1 <= self.tcurr <= tasks:
@@ -64,6 +83,9 @@ class MotionSequencer(Program):
                 self.loadstat = False
         if self.currloc != before and self.prevloc is not None:
             self.prevloc = before
+
+    def at(self, x: float, y: float) -> bool:
+        return math.hypot(x - self.xpos, y - self.ypos) <= self.reach
 
     def go(self, x: float, y: float, state: int) -> None:
         """Send the robot to (x, y): new goal, new motion state, busy."""

@@ -10,6 +10,11 @@ For every task, each scan:
 The task with the lowest (most negative) weight gets the next free robot; ties go to the
 lower task number. Every robot's `tnext` gets that task; the motion sequencer takes it when
 the robot is free. Tasks are bound as lists (task number = position + 1), robots too.
+
+The thesis stopped its runs when the first output storage was full, and its formula does not
+see a full storage (it would keep sending robots there). `skip_full: true` (not the thesis)
+leaves tasks whose output storage is full out of the choice, for runs that go on until every
+storage is full.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 
-from softplc import Input, Output, Program
+from softplc import Input, Output, Param, Program
 
 
 def _ratio(numerator: float, denominator: float) -> float:
@@ -58,10 +63,15 @@ class TaskWeighting(Program):
     sPD = Input("current product demand % per task (tNN_sPD)")
     Tw = Output("task weight per task (tNN_Tw)")
     tnext = Output("task chosen for each robot's next trip (rNN_tnext)")
+    skip_full = Param(False, "leave tasks whose output storage is full out of the choice (not the thesis)")
 
     def scan(self) -> None:
         self.Tw = self.weights()
         self.tnext = [self.choose(robot, self.Tw) for robot in range(len(self.tnext))]
+
+    def open_tasks(self) -> list[int]:
+        """Numbers of the tasks a robot may be sent to (all, or those with room with skip_full)."""
+        return [n for n, level in enumerate(self.qSL, 1) if not (self.skip_full and level >= 100.0)]
 
     def weights(self) -> list[float]:
         return [
@@ -71,4 +81,4 @@ class TaskWeighting(Program):
 
     def choose(self, robot: int, weights: list[float]) -> int:
         """The task for robot number `robot` (0-based): here the lowest weight of all."""
-        return lowest_weight(weights)
+        return lowest_weight(weights, self.open_tasks())

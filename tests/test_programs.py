@@ -230,3 +230,61 @@ def test_optimal_gives_nothing_when_no_task_can_be_served():
     program.scan()
     assert program.tnext == [0]
     assert not any(math.isnan(cost) for cost in program.cost)
+
+
+def test_sequencer_parks_a_robot_left_without_work_and_a_task_takes_over():
+    program = sequencer(x=7.9, y=4.5)
+    program.park_after = 5.0
+    clock = program.clock
+    program.scan()  # first scan: (7.9, 4.5) is home
+    program.tnext = 1
+    program.scan()
+    arrive(program)
+    program.scan()
+    program.loadstat = True
+    program.scan()
+    arrive(program)
+    program.scan()
+    program.loadstat = True
+    program.scan()
+    assert program.currloc == 0 and (program.xpos, program.ypos) == (1.8, 2.5)  # done, standing on task 1's destination
+    program.tnext = 0
+    clock._now = 100.0  # noqa: SLF001 (the simulated clock is stepped by hand here)
+    program.scan()
+    clock._now = 104.0  # noqa: SLF001
+    program.scan()
+    assert not program.status  # 4 s without work: stays
+    clock._now = 105.0  # noqa: SLF001
+    program.scan()
+    assert (program.xgoal, program.ygoal, program.status, program.currloc) == (7.9, 4.5, True, 0)
+    assert program.goals == [1, 0]  # parking is not a goal for a task
+    program.xpos, program.ypos = 5.0, 3.5  # on its way home, a task arrives: it goes at once
+    program.tnext = 2
+    program.scan()
+    assert (program.currloc, program.tcurr, program.xgoal, program.ygoal) == (1, 2, 18.5, 7.5)
+
+
+def test_sequencer_without_park_after_stays_where_it_is():
+    program = sequencer(x=1.8, y=2.5)
+    program.clock._now = 1000.0  # noqa: SLF001
+    program.scan()
+    program.clock._now = 5000.0  # noqa: SLF001
+    program.scan()
+    assert not program.status and program.currloc == 0
+
+
+def test_skip_full_leaves_full_storages_out_of_the_choice():
+    program = make(TaskWeighting)
+    _weighting_inputs(program, iBL=[100.0, 20.0], qSL=[100.0, 50.0])
+    program.scan()
+    assert program.tnext == [1]  # the thesis's formula still picks task 1 with a full storage
+    program.skip_full = True
+    program.scan()
+    assert program.tnext == [2]
+    _weighting_inputs(program, iBL=[100.0, 20.0], qSL=[100.0, 100.0])
+    program.scan()
+    assert program.tnext == [0]
+    program = make(CooperativeDispatcher, compatible=[[1], [1, 2]], skip_full=True)
+    _weighting_inputs(program, iBL=[100.0, 20.0], qSL=[100.0, 50.0], robots=2)
+    program.scan()
+    assert program.tnext == [0, 2]  # the dedicated robot has nothing left to do

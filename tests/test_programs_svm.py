@@ -253,3 +253,18 @@ def test_interactive_labelling_in_a_terminal(tmp_path):
     assert b"please answer 1/2 or q" in output and b"T2-demand" in output
     lines = (tmp_path / "t.txt").read_text().splitlines()
     assert [line[:2] for line in lines] == ["0:", "1:"]
+
+
+def test_svm_dispatcher_with_skip_full_never_picks_a_full_storage(tmp_path):
+    from programs.svm_dispatcher import SvmDispatcher
+    from softplc.program import ProgramContext
+
+    always_task_1 = TaskModel(features=feature_names(2), classes=[0, 1], coef=[[0.0] * 6], intercept=[-1.0])
+    always_task_1.save(tmp_path / "m.json")
+    program = SvmDispatcher(ProgramContext("svm", SimClock(), {"model": str(tmp_path / "m.json"), "skip_full": True}))
+    program.setup()
+    program.iBL, program.sPD, program.tnext, program.svm_out = [50.0, 50.0], [0.0, 0.0], [0], 0
+    for levels, task in (([20.0, 20.0], 1), ([100.0, 20.0], 2), ([100.0, 100.0], 0)):
+        program.qSL = levels
+        program.scan()
+        assert program.tnext == [task]

@@ -50,7 +50,10 @@ def compare(
                 rows.append({**row, "skipped": why_not})
                 continue
             model = scenario.model if scenario.dispatcher == "svm" else DEFAULT_MODEL
-            variant = replace(scenario.with_dispatcher(dispatcher, model if dispatcher == "svm" else None), stop=stop)
+            # Runs that go on past the first full storage must not send robots to a full one
+            # (the optimal dispatcher never does; the thesis's formulas need skip_full for it).
+            variant = replace(scenario.with_dispatcher(dispatcher, model if dispatcher == "svm" else None), stop=stop,
+                              skip_full=stop != "any_full")
             result = run_scenario(variant, out_dir / variant.name if out_dir else None, figures=False, time_limit=time_limit)
             summary = result.summary
             row.update({

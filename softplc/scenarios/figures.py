@@ -70,6 +70,10 @@ def draw_levels(scenario: Scenario, recorder: Recorder, path: Path) -> None:
         for n in range(1, count + 1):
             right.plot(time, lev[f"T{n}-wt"], color=TASK_COLOURS[(n - 1) % len(TASK_COLOURS)], linewidth=1,
                        label=f"T{n}-wt")
+        if scenario.dispatcher != "optimal":
+            # Near-empty input buffers make x1 = 1 / (iFr * iBL / iBC) spike (the thesis's
+            # "data spikes"); a symmetric log scale shows the spikes and the decisive values near 0.
+            right.set_yscale("symlog", linthresh=1.0)
         right.set(ylabel=what)
         goals_axis = right.twinx()
         for n in range(1, count + 1):

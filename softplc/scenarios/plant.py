@@ -133,6 +133,7 @@ def plant_document(scenario: Scenario, compatible: list[list[int]]) -> dict[str,
                                                   "loadstat", "tnext")},
             **{tag: _each(tasks, tag) for tag in ("src_x", "src_y", "dest_x", "dest_y", "goals")},
         },
+        "params": {"park_after": scenario.park_after},
     }
     document: dict[str, Any] = {
         "version": 1,
@@ -164,15 +165,16 @@ def dispatcher_program(scenario: Scenario, compatible: list[list[int]]) -> dict[
             "bind": {**{tag: _each(tasks, tag) for tag in ("iFr", "iBL", "iBC", "sPPi", "qFr", "qSL", "sCDr", "sPD", "Tw")},
                      "tnext": _each(robots, "tnext")},
         }
+        entry["params"] = {"skip_full": scenario.skip_full}
         if kind == "cooperative":
-            entry["params"] = {"compatible": compatible}
+            entry["params"]["compatible"] = compatible
         return entry
     if kind == "svm":
         return {
             "name": "dispatch",
             "program": "programs.svm_dispatcher:SvmDispatcher",
             "bind": {**{tag: _each(tasks, tag) for tag in ("iBL", "qSL", "sPD")}, "tnext": _each(robots, "tnext"), "svm_out": "svm_out"},
-            "params": {"model": str(scenario.model)},
+            "params": {"model": str(scenario.model), "skip_full": scenario.skip_full},
         }
     return {
         "name": "dispatch",

@@ -31,7 +31,6 @@ class RobotRecord:
     idle: float = 0.0
     distance: float = 0.0
     last_currloc: int = 0
-    last_busy: bool = False
     last_load: int = 0
     last_xy: tuple[float, float] = (0.0, 0.0)
 
@@ -48,6 +47,7 @@ class Recorder:
         self.next_sample = 0.0
         self.last_time: float | None = None
         self.full_at: dict[str, float] = {}
+        self.trip_log: list[tuple[float, str, int]] = []  # (time the goal was issued, robot, task number)
         self.robot_records = {robot: RobotRecord() for robot in robots}
         for robot in robots:
             record = self.robot_records[robot]
@@ -67,19 +67,20 @@ class Recorder:
         dt = 0.0 if self.last_time is None else now - self.last_time
         self.last_time = now
         for robot, record in self.robot_records.items():
-            currloc, busy = value(f"{robot}_currloc"), value(f"{robot}_status")
-            if record.last_currloc == WAITING and not record.last_busy:
-                record.idle += dt  # it spent the last interval waiting for a command
+            currloc = value(f"{robot}_currloc")
+            if record.last_currloc == WAITING:
+                record.idle += dt  # it spent the last interval without a task (waiting, or parking)
             task = value(f"{robot}_tcurr")
             if currloc == TO_SOURCE and record.last_currloc != TO_SOURCE:
                 record.trips[task] = record.trips.get(task, 0) + 1
+                self.trip_log.append((now, robot, task))
             load = value(f"{robot}_load")
             if currloc == AT_DESTINATION and load < record.last_load:
                 record.delivered[task] = record.delivered.get(task, 0) + record.last_load - load
             xy = (value(f"{robot}_xpos"), value(f"{robot}_ypos"))
             record.distance += ((xy[0] - record.last_xy[0]) ** 2 + (xy[1] - record.last_xy[1]) ** 2) ** 0.5
             record.last_xy = xy
-            record.last_currloc, record.last_busy, record.last_load = currloc, busy, load
+            record.last_currloc, record.last_load = currloc, load
         for task in self.tasks:
             if task not in self.full_at and value(f"{task}_qSL") >= 100.0:
                 self.full_at[task] = now

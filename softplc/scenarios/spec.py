@@ -60,6 +60,8 @@ SCENARIO_SCHEMA: dict[str, Any] = {
             "properties": {
                 "handling_time": {"type": "number", "minimum": 0,
                                   "description": "Seconds a robot stands at a station to be loaded or unloaded."},
+                "park_after": {"type": "number", "minimum": 0,
+                               "description": "Seconds without a task before a robot drives back to its start (0: never)."},
             },
             "additionalProperties": False,
         },
@@ -69,6 +71,7 @@ SCENARIO_SCHEMA: dict[str, Any] = {
                 "type": {"enum": list(DISPATCHERS)},
                 "model": {"type": "string", "description": "svm: model JSON, relative to this file."},
                 "interval": {"type": "number", "exclusiveMinimum": 0, "description": "Seconds between decisions (default 1)."},
+                "skip_full": {"type": "boolean", "description": "Never send a robot to a full output storage (not the thesis)."},
             },
             "required": ["type"],
             "additionalProperties": False,
@@ -175,6 +178,8 @@ class Scenario:
     model: Path | None = None
     decision_interval: float = 1.0
     handling_time: float = 0.0
+    park_after: float = 0.0
+    skip_full: bool = False
     raw: dict[str, Any] = field(default_factory=dict)
     source: SourceMap | None = None
 
@@ -222,6 +227,7 @@ def load_scenario(path: str | Path, _chain: tuple[Path, ...] = ()) -> Scenario:
     dispatcher = data.get("dispatcher")
     if dispatcher is not None:
         kind, model, interval = dispatcher["type"], None, float(dispatcher.get("interval", 1.0))
+        skip_full = bool(dispatcher.get("skip_full", False))
         if kind == "svm":
             if "model" not in dispatcher:
                 problems.append(source.problem(("dispatcher",), "the svm dispatcher needs 'model: FILE.json' (softplc svm train)", at_key=True))
@@ -231,7 +237,7 @@ def load_scenario(path: str | Path, _chain: tuple[Path, ...] = ()) -> Scenario:
                     problems.append(source.problem(("dispatcher", "model"), f"no model file {model}"))
     else:
         assert base is not None  # the schema requires a dispatcher unless the file extends another
-        kind, model, interval = base.dispatcher, base.model, base.decision_interval
+        kind, model, interval, skip_full = base.dispatcher, base.model, base.decision_interval, base.skip_full
     if problems:
         raise ConfigError(problems)
     tasks = [_task(item) for item in data["tasks"]] if "tasks" in data else list(base.tasks) if base else []
@@ -251,6 +257,8 @@ def load_scenario(path: str | Path, _chain: tuple[Path, ...] = ()) -> Scenario:
         model=model,
         decision_interval=interval,
         handling_time=float(plant.get("handling_time", 0.0)),
+        park_after=float(plant.get("park_after", 0.0)),
+        skip_full=skip_full,
         raw={**data, "scenario": head, "plant": plant},
         source=source,
     )

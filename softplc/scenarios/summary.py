@@ -41,4 +41,6 @@ def summarise(scenario: Scenario, db: TagDatabase, recorder: Recorder, duration:
         "makespan_s": max(full_at.values()) if len(full_at) == len(tasks) else None,
         "idle_s_total": round(sum(robot["idle_s"] for robot in robots.values()), 3),
         "robots": robots,
+        "trip_log": [[round(time, 1), robot, tasks[number - 1]] for time, robot, number in recorder.trip_log
+                     if 1 <= number <= len(tasks)],
     }
