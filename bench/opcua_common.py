@@ -109,6 +109,16 @@ class ServerProcess:
         fields = Path(f"/proc/{self.pid}/stat").read_text().rsplit(")", 1)[1].split()
         return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
+    def cpu_wait_seconds(self) -> float:
+        """Seconds the server's threads were runnable but waited for a CPU (other processes ran)."""
+        total = 0.0
+        for task in Path(f"/proc/{self.pid}/task").iterdir():
+            try:
+                total += int((task / "schedstat").read_text().split()[1]) / 1e9
+            except (OSError, IndexError, ValueError):
+                pass
+        return total
+
     def stop(self) -> str:
         """Ctrl-C the server; return everything it printed to stderr (incl. task statistics)."""
         self.process.send_signal(signal.SIGINT)

@@ -44,7 +44,8 @@ class Counter:
         self.count += 1
 
 
-async def receive(endpoint: str, tags: list[str], seconds: float, server_cpu: Callable[[], float]) -> tuple[float, float]:
+async def receive(endpoint: str, tags: list[str], seconds: float, server_cpu: Callable[[], float],
+                  server_wait: Callable[[], float]) -> tuple[float, float, float]:
     async with Client(endpoint, timeout=30) as client:
         ns = await client.get_namespace_index("urn:softplc:tags")
         counter = Counter()
@@ -55,25 +56,25 @@ async def receive(endpoint: str, tags: list[str], seconds: float, server_cpu: Ca
             await subscription.subscribe_data_change(nodes[start:start + 1000], queuesize=16)
         await asyncio.sleep(1.0)  # initial values and settling
         counter.count = 0
-        started, cpu = time.perf_counter(), server_cpu()
+        started, cpu, wait = time.perf_counter(), server_cpu(), server_wait()
         await asyncio.sleep(seconds)
         elapsed = time.perf_counter() - started
-        rate, cpu_share = counter.count / elapsed, (server_cpu() - cpu) / elapsed
+        rate, cpu_share, wait_share = counter.count / elapsed, (server_cpu() - cpu) / elapsed, (server_wait() - wait) / elapsed
         await subscription.delete()
-    return rate, cpu_share
+    return rate, cpu_share, wait_share
 
 
-def measure(changes: int, seconds: float, folder: Path) -> tuple[float, float, dict[str, float], dict[str, float]]:
+def measure(changes: int, seconds: float, folder: Path) -> tuple[float, float, float, dict[str, float], dict[str, float]]:
     yaml_text = plant_yaml(TAGS, changing=changes)
     baseline = start_server(folder / "baseline", yaml_text, opcua=False)
     time.sleep(seconds)
     baseline_latency = task_latency(baseline.stop())
     server = start_server(folder / "served", yaml_text)
     try:
-        rate, cpu = asyncio.run(receive(server.endpoint, changing_tags(yaml_text), seconds, server.cpu_seconds))
+        rate, cpu, wait = asyncio.run(receive(server.endpoint, changing_tags(yaml_text), seconds, server.cpu_seconds, server.cpu_wait_seconds))
     finally:
         output = server.stop()
-    return rate, cpu, task_latency(output), baseline_latency
+    return rate, cpu, wait, task_latency(output), baseline_latency
 
 
 def main() -> int:
@@ -84,19 +85,20 @@ def main() -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for changes in args.changes:
-            rate, cpu, latency, baseline = measure(changes, args.seconds, Path(tmp) / str(changes))
-            rows.append((changes, rate, cpu, latency, baseline))
-            print(f"{changes} tags/scan: offered {changes * 100:,}/s, delivered {rate:,.0f}/s, server CPU {cpu:.0%}, "
+            rate, cpu, wait, latency, baseline = measure(changes, args.seconds, Path(tmp) / str(changes))
+            rows.append((changes, rate, cpu, wait, latency, baseline))
+            print(f"{changes} tags/scan: offered {changes * 100:,}/s, delivered {rate:,.0f}/s, server CPU {cpu:.0%} "
+                  f"(waited for a CPU {wait:.0%} of the time), "
                   f"10 ms task latency p99 {latency['p99']:.3f} ms max {latency['max']:.3f} ms, overruns {latency['overruns']:.0f} "
                   f"(without OPC UA: p99 {baseline['p99']:.3f} ms max {baseline['max']:.3f} ms)", flush=True)
-    print("\n| tags changed per 10 ms scan | offered changes/s | delivered to the subscriber /s | server CPU "
+    print("\n| tags changed per 10 ms scan | offered changes/s | delivered to the subscriber /s | server CPU | server waiting for a CPU "
           "| 10 ms task start latency p99 / max (ms) | overruns | same plant without OPC UA: p99 / max (ms) |")
-    print("|---:|---:|---:|---:|---:|---:|---:|")
-    for changes, rate, cpu, latency, baseline in rows:
-        print(f"| {changes} | {changes * 100:,} | {rate:,.0f} | {cpu:.0%} | {latency['p99']:.3f} / {latency['max']:.3f} "
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for changes, rate, cpu, wait, latency, baseline in rows:
+        print(f"| {changes} | {changes * 100:,} | {rate:,.0f} | {cpu:.0%} | {wait:.0%} | {latency['p99']:.3f} / {latency['max']:.3f} "
               f"| {latency['overruns']:.0f} | {baseline['p99']:.3f} / {baseline['max']:.3f} |")
     # The goal: some load with >= 20k/s delivered while p99 <= 1 ms.
-    best = max((rate for _, rate, _, latency, _ in rows if latency["p99"] <= LATENCY_GOAL_MS), default=0.0)
+    best = max((rate for _, rate, _, _, latency, _ in rows if latency["p99"] <= LATENCY_GOAL_MS), default=0.0)
     return 0 if goal("changes/s delivered with 10 ms task p99 <= 1 ms", best, RATE_GOAL, at_least=True) else 1
 
 

@@ -79,12 +79,10 @@ class Publisher:
         return len(self._pending)
 
     def _on_change(self, changed: Sequence[Tag]) -> None:
-        # Runs inside the scan cycle: note and return, nothing more.
+        # Runs inside the scan cycle: note and return, nothing more (every tag has a node).
         pending = self._pending
-        node_ids = self.node_ids
         for tag in changed:
-            if tag.definition.name in node_ids:
-                pending[tag.definition.name] = tag
+            pending[tag.definition.name] = tag
         self._wake.set()
 
     async def _push_forever(self) -> None:
