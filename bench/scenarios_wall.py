@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -27,14 +28,18 @@ from softplc.scenarios.spec import builtin_scenarios  # noqa: E402
 GOAL_S = 10.0
 
 
-def run_once(name: str, out: Path) -> tuple[float, dict]:
+def run_once(name: str, out: Path) -> tuple[float, float, dict]:
+    """Wall seconds, CPU seconds (user + system of the process) and the summary of one run."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.monotonic()
     done = subprocess.run([sys.executable, "-m", "softplc.cli", "scenario", "run", name, "--out", str(out), "--json"],
                           capture_output=True, text=True, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
     wall = time.monotonic() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if done.returncode != 0:
         raise SystemExit(f"{name} failed:\n{done.stderr}")
-    return wall, json.loads(done.stdout)
+    return wall, cpu, json.loads(done.stdout)
 
 
 def main() -> int:
@@ -44,15 +49,16 @@ def main() -> int:
     args = parser.parse_args()
     names = args.names or [path.stem for path in builtin_scenarios()]
     print(f"load average at start: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    print(f"{'scenario':<22} {'sim s':>8} {'wall s':>7} {'x real time':>11}  records identical")
+    print(f"{'scenario':<22} {'sim s':>8} {'wall s':>7} {'CPU s':>6} {'x real time':>11}  records identical")
     missed = 0
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
-            walls, outs = [], []
+            walls, cpus, outs = [], [], []
             for index in range(max(1, args.repeat)):
                 out = Path(tmp) / f"{name}-{index}"
-                wall, summary = run_once(name, out)
+                wall, cpu, summary = run_once(name, out)
                 walls.append(wall)
+                cpus.append(cpu)
                 outs.append(out)
             identical = all(
                 (outs[0] / f"{kind}_{name}.csv").read_bytes() == (other / f"{kind}_{name}.csv").read_bytes()
@@ -61,7 +67,8 @@ def main() -> int:
             sim = summary["sim_duration_s"]
             flag = "" if best <= GOAL_S else f"   GOAL MISSED (> {GOAL_S:g} s)"
             missed += bool(flag)
-            print(f"{name:<22} {sim:8.1f} {best:7.2f} {sim / best:11.0f}  {'yes' if identical else 'NO'}{flag}")
+            same = ("yes" if identical else "NO") if len(outs) > 1 else "(one run)"
+            print(f"{name:<22} {sim:8.1f} {best:7.2f} {min(cpus):6.2f} {sim / best:11.0f}  {same}{flag}")
     print(f"load average at end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 1 if missed else 0
 
