@@ -56,13 +56,14 @@ class Clock(ABC):
 
 
 _SPIN_MARGIN = 0.0005
+_NAP = 0.0002  # longest nap of the last stretch before a deadline (blocks the loop that long)
 
 
 class RealClock(Clock):
     """Monotonic real time.
 
     `spin` is how long before a deadline `sleep_until` stops sleeping in the event loop and
-    yields in a tight loop instead: event-loop timers fire late (asyncio's ~1-2 ms on a typical
+    approaches the deadline in short kernel naps between loop turns instead: event-loop timers fire late (asyncio's ~1-2 ms on a typical
     Linux VM: epoll's millisecond resolution and more; uvloop's ~0.3 ms early), which would
     dominate a 10 ms task's start latency. The margin adapts: it follows the recent worst
     lateness of the loop's timers plus 0.5 ms, between 0.5 ms and `max_spin`.
@@ -126,7 +127,13 @@ class RealClock(Clock):
         elif remaining <= 0:
             await asyncio.sleep(0)  # always give the loop a turn, as SimClock and asyncio.sleep(0) do
         while self.now() < deadline:
+            # The last stretch: give the loop a turn, then nap in the kernel (precise to ~0.1 ms)
+            # instead of burning the CPU. A busy spin would also use up the budget of a
+            # real-time process (--rt-priority), which Linux then throttles for 50 ms.
             await asyncio.sleep(0)
+            remaining = deadline - self.now()
+            if remaining > 0:
+                time.sleep(min(remaining, _NAP))
 
     async def run_blocking(self, function: Callable[..., T], *args: Any) -> T:
         return await asyncio.get_running_loop().run_in_executor(None, function, *args)
