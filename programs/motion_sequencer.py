@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 
+from programs.bindings import check_lengths
 from softplc import TON, InOut, Input, Output, Param, Program
 
 WAITING, TO_SOURCE, AT_SOURCE, TO_DESTINATION, AT_DESTINATION = range(5)
@@ -52,6 +53,7 @@ class MotionSequencer(Program):
 
     def scan(self) -> None:
         if self.home is None:
+            check_lengths(self, "src_x", "src_y", "dest_x", "dest_y", "goals")
             self.home = (self.xpos, self.ypos)  # where the robot started: its parking place
         tasks = len(self.src_x)
         has_task = 1 <= self.tnext <= tasks

@@ -24,6 +24,7 @@ import math
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from programs.bindings import check_lengths
 from softplc import Input, Output, Param, Program
 
 IDLE = 0
@@ -53,7 +54,14 @@ class OptimalAssignment(Program):
     compatible = Param([[1, 2]], "task numbers each robot may serve, one list per robot")
     speed = Param(0.2, "robot speed used to estimate driving time, m/s")
 
+    def setup(self) -> None:
+        self.checked = False
+
     def scan(self) -> None:
+        if not self.checked:
+            check_lengths(self, "iBM", "iFr", "qSM", "qSC", "src_x", "src_y", "dest_x", "dest_y", "cost")
+            check_lengths(self, "currloc", "xpos", "ypos", "loadcap", "load", "tcurr", "tnext")
+            self.checked = True
         tasks, robots = len(self.iBM), len(self.currloc)
         idle = [r for r in range(robots) if self.currloc[r] == IDLE]
         claimed = [0.0] * tasks  # items robots already heading to a source will take

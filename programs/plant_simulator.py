@@ -22,6 +22,7 @@ Two deliberate differences from matHand_sim, both to keep every item accounted f
 
 from __future__ import annotations
 
+from programs.bindings import check_lengths
 from programs.buffer_filler import ItemArrivals
 from softplc import TON, InOut, Input, Output, Param, Program
 
@@ -59,6 +60,9 @@ class MaterialHandlingPlant(Program):
         self.exchanged: list[bool] = []
 
     def scan(self) -> None:
+        if not self.arrivals:  # first scan: the bindings are known now
+            check_lengths(self, "iBM", "iBC", "iFr", "iBL", "qSM", "qSC", "qSL", "qFr")
+            check_lengths(self, "tcurr", "currloc", "loadcap", "load", "loadstat")
         tasks = len(self.iBM)
         while len(self.arrivals) < tasks:
             self.arrivals.append(ItemArrivals(self.clock))

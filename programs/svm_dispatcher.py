@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from programs.bindings import check_lengths
 from softplc import Input, Output, Param, Program
 from softplc.svm.model import TaskModel
 
@@ -38,6 +39,7 @@ class SvmDispatcher(Program):
         self.classifier = TaskModel.load(find_model(self.model))  # a bad file faults the program with the reason
 
     def scan(self) -> None:
+        check_lengths(self, "iBL", "qSL", "sPD")
         features: list[float] = []
         for levels in zip(self.iBL, self.qSL, self.sPD):
             features += levels

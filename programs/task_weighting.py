@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 
+from programs.bindings import check_lengths
 from softplc import Input, Output, Param, Program
 
 
@@ -65,7 +66,13 @@ class TaskWeighting(Program):
     tnext = Output("task chosen for each robot's next trip (rNN_tnext)")
     skip_full = Param(False, "leave tasks whose output storage is full out of the choice (not the thesis)")
 
+    def setup(self) -> None:
+        self.checked = False
+
     def scan(self) -> None:
+        if not self.checked:
+            check_lengths(self, "iFr", "iBL", "iBC", "sPPi", "qFr", "qSL", "sCDr", "sPD", "Tw")
+            self.checked = True
         self.Tw = self.weights()
         self.tnext = [self.choose(robot, self.Tw) for robot in range(len(self.tnext))]
 

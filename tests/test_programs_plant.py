@@ -153,3 +153,13 @@ async def test_handling_time_keeps_the_robot_at_the_station(make_config, tmp_pat
     ready = next(t for t, _, loadstat in seen if loadstat)
     assert ready == pytest.approx(5.0, abs=0.11)  # ... released after the handling time
     assert all(load == 20 for _, load, _ in seen)  # loaded once
+
+
+async def test_lists_of_different_lengths_fault_the_program_with_a_clear_reason(make_config, tmp_path):
+    text = PLANT.replace("          iBC: [t01_iBC, t02_iBC]", "          iBC: [t01_iBC]")
+    runtime = Runtime(make_config(text), SimClock(), state_dir=tmp_path)
+    await runtime.run(duration=1)
+    instance = runtime.program("plant")
+    assert instance.state.value == "FAULTED"
+    assert "'iBC' is bound to 1 tags but 'iBM' to 2" in instance.error
+    assert runtime.program("demand").state.value == "RUNNING"  # the rest of the plant keeps scanning

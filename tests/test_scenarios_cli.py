@@ -122,3 +122,22 @@ def test_compare_tabulates_dispatchers(capsys, tmp_path):
     assert set(rows) == {"weighting", "cooperative", "svm", "optimal"}
     assert "same as weighting" in rows["cooperative"]
     assert "—" not in rows["optimal"].split("|")[5]  # items delivered is a number
+
+
+def test_an_unreachable_station_shows_as_navigation_failures(capsys, tmp_path):
+    path = tmp_path / "walled.yaml"
+    # task 1's source is inside the rack island in the middle of the factory map
+    path.write_text(textwrap.dedent("""\
+        scenario: {name: walled, time_limit: 120}
+        dispatcher: {type: weighting}
+        tasks:
+          - {id: t01, source: {x: 12.5, y: 4.3}, destination: {x: 1.8, y: 2.5}}
+        robots:
+          - {id: r01, start: {x: 7.925, y: 5.925}}
+        """))
+    code, out, err = cli(capsys, "scenario", "run", str(path), "--out", str(tmp_path / "out"), "--no-figures")
+    assert code == 0, err
+    assert "navigation FAILED" in out
+    summary = json.loads((tmp_path / "out" / "summary_walled.json").read_text())
+    assert summary["robots"]["r01"]["navigation_failures"] >= 1
+    assert summary["goals_per_task"]["t01"] == 1  # still waiting to reach the source

@@ -30,6 +30,8 @@ class RobotRecord:
     delivered: dict[int, int] = field(default_factory=dict)
     idle: float = 0.0
     distance: float = 0.0
+    failures: int = 0  # times its navigation gave up on a goal (navstate "failed")
+    last_navstate: str = ""
     last_currloc: int = 0
     last_load: int = 0
     last_xy: tuple[float, float] = (0.0, 0.0)
@@ -81,6 +83,10 @@ class Recorder:
             record.distance += ((xy[0] - record.last_xy[0]) ** 2 + (xy[1] - record.last_xy[1]) ** 2) ** 0.5
             record.last_xy = xy
             record.last_currloc, record.last_load = currloc, load
+            navstate = value(f"{robot}_navstate")
+            if navstate == "failed" and record.last_navstate != "failed":
+                record.failures += 1
+            record.last_navstate = navstate
         for task in self.tasks:
             if task not in self.full_at and value(f"{task}_qSL") >= 100.0:
                 self.full_at[task] = now

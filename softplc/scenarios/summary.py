@@ -22,6 +22,7 @@ def summarise(scenario: Scenario, db: TagDatabase, recorder: Recorder, duration:
             "idle_s": round(record.idle, 3),
             "utilisation": round(1.0 - record.idle / duration, 4) if duration > 0 else 0.0,
             "distance_m": round(record.distance, 2),
+            "navigation_failures": record.failures,
         }
     total = sum(delivered.values())
     full_at = {task: round(recorder.full_at[task], 3) for task in tasks if task in recorder.full_at}
