@@ -4,18 +4,29 @@ A robot compatible with one task only (a dedicated robot) always stays on it; a 
 robot goes where the task weighting of case I says it is needed most, among the tasks it can
 serve. Which robot can serve which task comes from the robot and task specifications through
 the fleet's compatibility check (size, load capacity, speeds, hardware — thesis Tables 6–7):
-the `compatible` parameter lists, per robot, the task numbers it may serve, as computed by
-`softplc.fleet.compat` (the scenario runner fills it in; `softplc robots compat` prints it).
+the `compatible` parameter lists, per robot, the task numbers it may serve (the scenario runner
+fills it in from the fleet's check), or `robots_file`, `tasks_file`, `robot_ids` and `task_ids`
+name the fleet's files and the check runs at start-up (see programs/compatibility.py).
 """
 
 from __future__ import annotations
 
+from programs.compatibility import compatible_numbers
 from programs.task_weighting import TaskWeighting, lowest_weight
 from softplc import Param
 
 
 class CooperativeDispatcher(TaskWeighting):
     compatible = Param([[1, 2]], "task numbers each robot may serve, one list per robot, e.g. [[1, 2], [2]]")
+    robots_file = Param("", "instead of compatible: the fleet's robots file (robots/robots.yaml)")
+    tasks_file = Param("", "... and tasks file (robots/tasks.yaml)")
+    robot_ids = Param([], "robot ids in the order the robots are bound")
+    task_ids = Param([], "task ids in the order the tasks are bound")
+
+    def setup(self) -> None:
+        super().setup()
+        if self.robots_file:
+            self.compatible = compatible_numbers(self.robots_file, self.tasks_file, self.robot_ids, self.task_ids)
 
     def choose(self, robot: int, weights: list[float]) -> int:
         allowed = self.compatible[robot] if robot < len(self.compatible) else []

@@ -14,7 +14,8 @@ delivered, divided by the share of the task's output storage still to fill:
     cost   = drive / items / (room / capacity)
 
 Incompatible pairs (the fleet's compatibility check, parameter `compatible`) and full
-storages are masked out. Robots already on a trip keep `tnext` = 0.
+storages are masked out (`robots_file`/`tasks_file` instead of `compatible`: see
+programs/compatibility.py). Robots already on a trip keep `tnext` = 0.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from programs.bindings import check_lengths
+from programs.compatibility import compatible_numbers
 from softplc import Input, Output, Param, Program
 
 IDLE = 0
@@ -52,10 +54,16 @@ class OptimalAssignment(Program):
     tcurr = Input("task being served (rNN_tcurr)")
     tnext = Output("task assigned for the next trip, 0 = none (rNN_tnext)")
     compatible = Param([[1, 2]], "task numbers each robot may serve, one list per robot")
+    robots_file = Param("", "instead of compatible: the fleet's robots file (programs/compatibility.py)")
+    tasks_file = Param("", "... and tasks file")
+    robot_ids = Param([], "robot ids in the order the robots are bound")
+    task_ids = Param([], "task ids in the order the tasks are bound")
     speed = Param(0.2, "robot speed used to estimate driving time, m/s")
 
     def setup(self) -> None:
         self.checked = False
+        if self.robots_file:
+            self.compatible = compatible_numbers(self.robots_file, self.tasks_file, self.robot_ids, self.task_ids)
 
     def scan(self) -> None:
         if not self.checked:

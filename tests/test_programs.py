@@ -288,3 +288,18 @@ def test_skip_full_leaves_full_storages_out_of_the_choice():
     _weighting_inputs(program, iBL=[100.0, 20.0], qSL=[100.0, 50.0], robots=2)
     program.scan()
     assert program.tnext == [0, 2]  # the dedicated robot has nothing left to do
+
+
+def test_compatibility_from_the_fleets_files_is_thesis_table_7():
+    program = make(CooperativeDispatcher, robots_file="robots/case2-sim2/robots.yaml", tasks_file="robots/case2-sim2/tasks.yaml",
+                   robot_ids=["r01", "r02", "r03"], task_ids=["t01", "t02"])
+    assert program.compatible == [[1], [2], [1, 2]]
+    program = make(OptimalAssignment, robots_file="robots/case2-sim1/robots.yaml", tasks_file="robots/case2-sim1/tasks.yaml",
+                   robot_ids=["r01", "r02"], task_ids=["t02", "t01"])
+    assert program.compatible == [[1, 2], [1]]  # task numbers follow task_ids' order: t02 is task 1 here
+
+
+def test_an_unknown_id_in_the_compatibility_files_is_named():
+    with pytest.raises(KeyError, match="r09"):
+        make(CooperativeDispatcher, robots_file="robots/robots.yaml", tasks_file="robots/tasks.yaml",
+             robot_ids=["r09"], task_ids=["t01"])

@@ -1,0 +1,35 @@
+"""Which tasks each robot may serve, for dispatchers: from a `compatible` list, or from the fleet's files.
+
+A dispatcher binds its robots and tasks as lists; `compatible` gives, per robot (in that
+order), the numbers of the tasks (1-based, in the task order) it may serve. Instead, name the
+fleet's robots and tasks files and the ids in binding order, and the fleet's compatibility
+check (size, load capacity, speeds, hardware; thesis §4.7.2) works it out:
+
+    params:
+      robots_file: robots/robots.yaml
+      tasks_file: robots/tasks.yaml
+      robot_ids: [r01, r02, r03]
+      task_ids: [t01, t02]
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from softplc.fleet.compat import Compatibility
+
+PROJECT = Path(__file__).resolve().parent.parent
+
+
+def _find(path: str) -> Path:
+    candidate = Path(path)
+    return candidate if candidate.is_absolute() or candidate.exists() else PROJECT / candidate
+
+
+def compatible_numbers(robots_file: str, tasks_file: str, robot_ids: list[str], task_ids: list[str]) -> list[list[int]]:
+    """Per robot id, the numbers of the tasks (position in `task_ids` + 1) it can serve."""
+    compat = Compatibility.load(_find(robots_file), _find(tasks_file))  # ConfigError / KeyError say what is wrong
+    numbers = {task_id: number for number, task_id in enumerate(task_ids, 1)}
+    for task_id in task_ids:
+        compat.task(task_id)  # an unknown id raises KeyError with the known ones
+    return [sorted(numbers[task] for task in compat.tasks_for(robot) if task in numbers) for robot in robot_ids]
