@@ -1,0 +1,11 @@
+"""The thesis's case studies as reproducible scenarios (docs/case-studies.md).
+
+    scenario = load_scenario(find_scenario("case1-sim1"))   # or a path to your own YAML
+    result = run_scenario(scenario, Path("runs/case1-sim1"))
+    result.summary["goals_per_task"]                           # {"t01": 6, "t02": 3}
+"""
+
+from softplc.scenarios.runner import RunResult, run_scenario, run_scenario_async
+from softplc.scenarios.spec import Scenario, builtin_scenarios, find_scenario, load_scenario
+
+__all__ = ["RunResult", "Scenario", "builtin_scenarios", "find_scenario", "load_scenario", "run_scenario", "run_scenario_async"]
