@@ -44,7 +44,7 @@ class OptimalAssignment(Program):
     src_y = Input("source y (tNN_src_y)")
     dest_x = Input("destination x (tNN_dest_x)")
     dest_y = Input("destination y (tNN_dest_y)")
-    cost = Output("lowest assignment cost per task, s per item, for the records (tNN_Tw)", optional=True)
+    cost = Output("lowest assignment cost per task at the last decision, s per item, 0 = masked (tNN_Tw)", optional=True)
     # per robot
     xpos = Input("robot x (rNN_xpos)")
     ypos = Input("robot y (rNN_ypos)")
@@ -96,7 +96,7 @@ class OptimalAssignment(Program):
                 if matrix[row, column] < MASKED:
                     assigned[idle[row]] = slots[column][0] + 1
         self.tnext = assigned
-        if self.cost is not None:
+        if self.cost is not None and idle:  # held between decisions, so the record shows the last one
             self.cost = [c if math.isfinite(c) else 0.0 for c in costs]
 
     def pair_cost(self, r: int, t: int, slot: int, claimed: float, in_flight: float) -> float | None:
