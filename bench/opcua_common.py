@@ -130,8 +130,12 @@ class ServerProcess:
         return rest
 
 
-def start_server(folder: Path, yaml_text: str, *extra: str, opcua: bool = True, timeout: float = 120) -> ServerProcess:
-    """Write the plant to `folder` and launch `softplc run` on it; wait until it serves."""
+def start_server(folder: Path, yaml_text: str, *extra: str, opcua: bool = True, nice: int = 0, timeout: float = 120) -> ServerProcess:
+    """Write the plant to `folder` and launch `softplc run` on it; wait until it serves.
+
+    `nice` < 0 runs the server at a higher CPU priority than this client and other processes
+    (as a PLC runtime is deployed); needs root, else the server runs at normal priority.
+    """
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "tagdb.yaml").write_text(yaml_text)
     (folder / "bench_changer.py").write_text(CHANGER)
@@ -139,6 +143,8 @@ def start_server(folder: Path, yaml_text: str, *extra: str, opcua: bool = True, 
     command = [sys.executable, "-m", "softplc.cli", "run", str(folder / "tagdb.yaml"), "--no-status", "--no-modbus", "--no-fleet"]
     command += ["--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/", "--opcua-security", "None"] if opcua else ["--no-opcua"]
     command += list(extra)
+    if nice:
+        command = ["nice", "-n", str(nice), *command]
     launched = time.perf_counter()
     process = subprocess.Popen(command, cwd=str(REPO), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                                env=dict(os.environ, PYTHONPATH=str(REPO)))

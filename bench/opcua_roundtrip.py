@@ -115,13 +115,14 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--count", type=int, default=1000)
     parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--nice", type=int, default=0, help="run the server (and its baseline) at this niceness, e.g. -10 (root)")
     args = parser.parse_args()
     yaml_text = plant_yaml(1000, changing=10)
     with tempfile.TemporaryDirectory() as tmp:
-        baseline = start_server(Path(tmp) / "baseline", yaml_text, opcua=False)
+        baseline = start_server(Path(tmp) / "baseline", yaml_text, opcua=False, nice=args.nice)
         time.sleep(args.seconds)
         baseline_latency = task_latency(baseline.stop())
-        server = start_server(Path(tmp) / "served", yaml_text)
+        server = start_server(Path(tmp) / "served", yaml_text, nice=args.nice)
         try:
             wait = server.cpu_wait_seconds()
             started = time.perf_counter()

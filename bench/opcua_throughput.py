@@ -64,12 +64,12 @@ async def receive(endpoint: str, tags: list[str], seconds: float, server_cpu: Ca
     return rate, cpu_share, wait_share
 
 
-def measure(changes: int, seconds: float, folder: Path) -> tuple[float, float, float, dict[str, float], dict[str, float]]:
+def measure(changes: int, seconds: float, folder: Path, nice: int = 0) -> tuple[float, float, float, dict[str, float], dict[str, float]]:
     yaml_text = plant_yaml(TAGS, changing=changes)
-    baseline = start_server(folder / "baseline", yaml_text, opcua=False)
+    baseline = start_server(folder / "baseline", yaml_text, opcua=False, nice=nice)
     time.sleep(seconds)
     baseline_latency = task_latency(baseline.stop())
-    server = start_server(folder / "served", yaml_text)
+    server = start_server(folder / "served", yaml_text, nice=nice)
     try:
         rate, cpu, wait = asyncio.run(receive(server.endpoint, changing_tags(yaml_text), seconds, server.cpu_seconds, server.cpu_wait_seconds))
     finally:
@@ -81,11 +81,12 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--changes", type=int, nargs="+", default=[100, 200, 400], help="tags changed per 10 ms scan")
     parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--nice", type=int, default=0, help="run the server (and its baseline) at this niceness, e.g. -10 (root)")
     args = parser.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for changes in args.changes:
-            rate, cpu, wait, latency, baseline = measure(changes, args.seconds, Path(tmp) / str(changes))
+            rate, cpu, wait, latency, baseline = measure(changes, args.seconds, Path(tmp) / str(changes), args.nice)
             rows.append((changes, rate, cpu, wait, latency, baseline))
             print(f"{changes} tags/scan: offered {changes * 100:,}/s, delivered {rate:,.0f}/s, server CPU {cpu:.0%} "
                   f"(waited for a CPU {wait:.0%} of the time), "
