@@ -89,6 +89,14 @@ class Plant:
         results = self.db.submit([(f"{robot_id}_xgoal", x), (f"{robot_id}_ygoal", y), (f"{robot_id}_status", True)], "test")
         assert results == [None, None, None], results
 
+    async def trip(self, robot_id: str, x: float, y: float, limit: float) -> float:
+        """Send a robot to (x, y) and wait until it is done (arrived or failed); the clock time taken."""
+        start = self.clock.now()
+        self.send(robot_id, x, y)
+        await self.run_until(lambda: self.db.value(f"{robot_id}_status"), limit=1.0, step=0.01)  # the command landed
+        await self.run_until(lambda: self.idle(robot_id), limit=limit)
+        return self.clock.now() - start
+
     async def run_until(self, condition: Callable[[], bool], limit: float, step: float = 0.1) -> float:
         """Advance the clock until `condition()` holds; fail after `limit` clock seconds."""
         start = self.clock.now()

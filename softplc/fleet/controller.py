@@ -93,13 +93,23 @@ class PurePursuit:
         limits: SpeedLimits,
         current: tuple[float, float] = (0.0, 0.0),
         dt: float = 0.1,
+        *,
+        careful: bool = False,
     ) -> tuple[float, float]:
-        """(v, w) toward the path within `limits`; (0, 0) once at the path's end."""
-        tx, ty = self.target(pose, path, segment)
+        """(v, w) toward the path within `limits`; (0, 0) once at the path's end.
+
+        `careful` (near a wall): steer at the next waypoint itself instead of a look-ahead
+        point, and turn on the spot for smaller heading errors, so no corner is cut.
+        """
+        if careful:
+            tx, ty = path[min(segment + 1, len(path) - 1)]
+        else:
+            tx, ty = self.target(pose, path, segment)
+        rotate_threshold = self.rotate_threshold / 3 if careful else self.rotate_threshold
         end_x, end_y = path[-1]
         remaining = math.hypot(end_x - pose.x, end_y - pose.y)
         alpha = wrap_angle(math.atan2(ty - pose.y, tx - pose.x) - pose.heading)
-        if abs(alpha) > self.rotate_threshold:
+        if abs(alpha) > rotate_threshold:
             v = 0.0
             w = math.copysign(min(limits.angular, self.heading_gain * abs(alpha)), alpha)
         else:
@@ -107,7 +117,7 @@ class PurePursuit:
             curvature = 2.0 * math.sin(alpha) / distance
             v = limits.linear * min(1.0, max(0.15, remaining / self.slowdown_distance))
             # Slow down in proportion to the heading error: arcs stay tight and inside the lane.
-            v *= max(0.2, 1.0 - abs(alpha) / self.rotate_threshold * 0.7)
+            v *= max(0.2, 1.0 - abs(alpha) / rotate_threshold * 0.7)
             w = v * curvature
             if abs(w) > limits.angular:
                 v *= limits.angular / abs(w)

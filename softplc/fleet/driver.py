@@ -48,6 +48,7 @@ class DriverSettings:
     patience: float = 6.0  # s stopped before detouring around a robot we have right of way over
     replan_interval: float = 2.0  # s between detour attempts while blocked
     free_hold: float = 1.0  # s of free driving that end a blockage (no flapping)
+    make_way_limit: float = 20.0  # s of making way after which going round is tried too
     give_up: float = 180.0  # s blocked before the trip fails
     status_grace: float = 0.35  # s our own status write takes to show in the tags
     traffic: TrafficSettings = TrafficSettings()
@@ -164,7 +165,6 @@ class RobotDriver:
 
     def step(self, now: float, command: Command, peers: PeerView) -> Report:
         """One control cycle: react to the goal tags, follow the path, move, report."""
-        self._status_event = None
         self._command(now, command, peers)
         v, w = 0.0, 0.0
         if self.path is not None:
@@ -174,10 +174,8 @@ class RobotDriver:
         self.v, self.w = v, w
         if v or w:
             self.pose = integrate(self.pose, v, w, self.cycle)
-        return Report(
-            self.pose.x, self.pose.y, self.pose.heading, v, w, self.navstate, self.reason,
-            self._status_event, self.status_seq, self.route,
-        )
+        event, self._status_event = self._status_event, None  # also events of plan_done()
+        return Report(self.pose.x, self.pose.y, self.pose.heading, v, w, self.navstate, self.reason, event, self.status_seq, self.route)
 
     def take_plan_request(self) -> PlanRequest | None:
         """The plan to run now, if any (the caller runs it and calls `plan_done`)."""
@@ -291,8 +289,9 @@ class RobotDriver:
             elif not self._arrived:  # a goal snapped out of an obstacle: as close as it gets
                 self._arrive(now)
             return 0.0, 0.0
-        self.segment = self.pursuit.progress(pose, self.path, self.segment)
-        v, w = self.pursuit.command(pose, self.path, self.segment, self.limits, (self.v, self.w), self.cycle)
+        careful = not self.planner.is_free(pose.x, pose.y)  # inside the safety margin of a wall
+        self.segment = self.pursuit.progress(pose, self.path, self.segment) if not careful else self.segment
+        v, w = self.pursuit.command(pose, self.path, self.segment, self.limits, (self.v, self.w), self.cycle, careful=careful)
         verdict = self.traffic.check(pose, v, w, peers, self._blocker)
         v = verdict.v
         if v and not self._clear_of_walls(v, w):
@@ -337,6 +336,12 @@ class RobotDriver:
         if self._blocked_since is None:
             self._blocked_since = now
             self._next_replan = now + wait
+        demand = self.traffic.demanding(self.pose, peers)
+        if demand is not None and not make_way:
+            # A robot with right of way waits for us: get out of its way, now.
+            make_way, reason = True, f"yielding to {demand.id}"
+            if not self._make_way:
+                self._next_replan = min(self._next_replan, now)
         if make_way and reason.startswith("yielding"):
             reason = "making way for" + reason[len("yielding to"):]
         self._blocked_reason = reason
@@ -348,6 +353,8 @@ class RobotDriver:
             return
         if now >= self._next_replan and self._pending is None and self.goal is not None:
             self._next_replan = now + settings.replan_interval
+            if make_way and now - self._blocked_since >= settings.make_way_limit and int(now / settings.replan_interval) % 2:
+                make_way = False  # making way leads nowhere: every other attempt, try going round instead
             discs, keep_out = self.traffic.detour(self.pose, peers, self.planner.resolution, make_way=make_way)
             start = (self.pose.x, self.pose.y)
             self._request_plan(PlanRequest(0, self.planner, start, self.goal, discs, keep_out, detour=True, make_way=make_way))

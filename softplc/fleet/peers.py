@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 ACTIVE_STATES = frozenset({"planning", "moving", "blocked"})
-PEER_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "radius", "route")
+PEER_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "radius", "route", "navreason")
 
 
 @dataclass
@@ -35,6 +35,7 @@ class Peer:
     radius: float
     rank: int  # 0 has right of way over everyone
     route: list[tuple[float, float]] = field(default_factory=list)
+    reason: str = ""  # its navreason, e.g. "waiting for r07"
 
     def remaining_route(self, fallback_length: float = 1.5) -> list[tuple[float, float]]:
         """Where it is going: its route from the point nearest to it on (or straight ahead)."""
@@ -63,6 +64,7 @@ class PeerView:
         self.active = [row[4] in ACTIVE_STATES for row in rows]
         self.radius = [_number(row[5]) or 0.2 for row in rows]
         self.routes = [row[6] if len(row) > 6 and isinstance(row[6], str) else "" for row in rows]
+        self.reasons = [row[7] if len(row) > 7 and isinstance(row[7], str) else "" for row in rows]
         ranking = sorted(self.ids)
         self.rank = {robot_id: position for position, robot_id in enumerate(ranking)}
 
@@ -86,6 +88,7 @@ class PeerView:
             self.radius[position],
             self.rank[robot_id],
             decode_route(self.routes[position]) if self.active[position] else [],
+            self.reasons[position],
         )
 
     def near(self, robot_id: str, x: float, y: float, within: float) -> list[Peer]:

@@ -248,10 +248,13 @@ class PathPlanner:
         )
         cells = self._smooth(cells, blocked, penalty)
         path = [(sx, sy)] + [self.grid.center(*self._cell_of_index(index)) for index in cells[1:]]
+        if not self.is_free(sx, sy):
+            # Starting too close to a wall: first back out to the nearest clear cell.
+            path.insert(1, self.grid.center(*start_cell))
         if len(path) == 1:
             path.append(self.grid.center(*goal_cell))
-        if goal_cell == self.grid.cell(gx, gy) or math.dist(path[-1], goal) < 1e-9:
-            path[-1] = (gx, gy)
+        if self.is_free(gx, gy):
+            path[-1] = (gx, gy)  # the goal itself is clear: end exactly there, not at a cell centre
         length = sum(math.dist(a, b) for a, b in zip(path, path[1:]))
         return Plan(True, path, length=length, grid_length=grid_length, expanded=expanded)
 

@@ -8,7 +8,9 @@ The rules are deterministic and need only the other robots' tags (their `PeerVie
   stops; toward a robot it has right of way over, it slows down and stops only when close;
 - a robot without right of way that stays blocked plans a detour that keeps out of the other
   robot's route (`rNN_route`), or, if there is none, moves to the nearest spot off that route
-  and waits there until the way is clear — so two robots never deadlock in an aisle.
+  and waits there until the way is clear — so two robots never deadlock in an aisle;
+- a stopped robot that a robot with right of way is waiting for (its `rNN_navreason` names it)
+  makes way at once, farther from that robot.
 """
 
 from __future__ import annotations
@@ -26,11 +28,12 @@ from softplc.fleet.robots import Pose
 class TrafficSettings:
     horizon: float = 1.5  # s of motion checked against other robots
     safety: float = 0.12  # m kept between footprints
-    hysteresis: float = 0.1  # m more asked of the robot we stopped for, before moving again
-    plan_clearance: float = 0.2  # m a detour keeps from another robot's footprint
+    hysteresis: float = 0.08  # m more asked of the robot we stopped for, before moving again
+    plan_clearance: float = 0.3  # m a detour keeps from another robot's footprint (> safety + hysteresis)
     sense_range: float = 3.0  # m within which other robots are considered
     slow_band: float = 0.6  # m over which it slows for a robot it has right of way over
     route_horizon: float = 6.0  # m of another robot's route a detour keeps out of
+    room: float = 0.4  # m more kept from a robot that is waiting for us
 
 
 @dataclass
@@ -98,6 +101,15 @@ class Traffic:
         """Every parked robot on the floor, as obstacles for a new trip."""
         return [self.disc(pose, peer, resolution) for peer in peers.near(self.id, pose.x, pose.y, math.inf) if not peer.active]
 
+    def demanding(self, pose: Pose, peers: PeerView) -> Peer | None:
+        """A navigating robot with right of way that says it is waiting for us (in its navreason)."""
+        my_rank = peers.rank_of(self.id)
+        suffix = f" {self.id}"
+        for peer in peers.near(self.id, pose.x, pose.y, self.settings.sense_range):
+            if peer.active and peer.rank < my_rank and peer.reason.endswith(suffix):
+                return peer
+        return None
+
     def detour(self, pose: Pose, peers: PeerView, resolution: float, *, make_way: bool) -> tuple[list[Disc], list[Corridor]]:
         """Obstacles for a detour: nearby robots, and (to make way) the routes of those with right of way."""
         settings = self.settings
@@ -108,6 +120,8 @@ class Traffic:
             discs.append(self.disc(pose, peer, resolution))
             if make_way and peer.active and peer.rank < my_rank:
                 reach = self.radius + peer.radius + settings.plan_clearance
+                if peer.reason.endswith(f" {self.id}"):
+                    reach += settings.room  # it is waiting for us: clear its way by a margin
                 travelled = 0.0
                 route = peer.remaining_route()
                 for a, b in zip(route, route[1:]):

@@ -1,0 +1,304 @@
+"""The remote robot agent: a robot's own computer running its driver as an OPC UA client.
+
+    softplc robot-agent --endpoint opc.tcp://plc:4840/softplc/ --robot r01 --user r01 --password-file r01.pw
+
+The agent loads its robot's configuration (robots.yaml) and the map, connects, registers itself
+by writing `rNN_agent` (id, name, hardware, host: nobody types its address anywhere), subscribes
+to its goal tags and to every robot's traffic tags, and every cycle writes its pose and state as
+one `rNN_report`, which the runtime's fleet adapter publishes to the robot's read-only tags.
+When the runtime goes away the robot stops where it is, and the agent reconnects with
+exponential backoff; its driver (pose, path) survives the reconnection.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import os
+import socket
+import sys
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from asyncua import Client, ua
+
+from softplc import __version__
+from softplc.clock import Clock, RealClock
+from softplc.fleet.controller import SpeedLimits
+from softplc.fleet.driver import Command, DriverSettings, Report, RobotDriver
+from softplc.fleet.floor import Floor
+from softplc.fleet.gridmap import load_map
+from softplc.fleet.loop import ControlLoop
+from softplc.fleet.peers import PEER_TAGS, PeerView
+from softplc.fleet.protocol import Registration, encode_report
+from softplc.fleet.robots import RobotFile, load_robots, unknown_id_message
+from softplc.fleet.settings import DEFAULT_MAP, DEFAULT_ROBOTS
+
+log = logging.getLogger(__name__)
+
+DEFAULT_NAMESPACE = "urn:softplc:tags"
+PASSWORD_ENV = "SOFTPLC_PASSWORD"
+
+
+@dataclass
+class Credentials:
+    """How the agent logs in: a user and password, and/or a client certificate."""
+
+    user: str | None = None
+    password: str | None = None
+    certificate: Path | None = None
+    private_key: Path | None = None
+    security: str = "None"  # None | Basic256Sha256_Sign | Basic256Sha256_SignAndEncrypt
+
+
+class SubscriptionIO:
+    """The driver's inputs from OPC UA subscriptions, its output as one report write per cycle."""
+
+    def __init__(self, client: Client, namespace: int, robot_id: str, ids: list[str], first_event: int) -> None:
+        self.client = client
+        self.id = robot_id
+        self.ids = ids
+        self.values: dict[str, Any] = {}
+        self._report = client.get_node(ua.NodeId(f"{robot_id}_report", namespace))
+        self._seq = 0
+        self._first_event = first_event  # status events before this session are not re-sent
+        self._status: tuple[int, bool] | None = None
+
+    def datachange_notification(self, node: Any, value: Any, data: Any) -> None:
+        self.values[node.nodeid.Identifier] = value
+
+    def status_change_notification(self, status: Any) -> None:
+        pass  # the session's end is noticed by the next write or the connection watchdog
+
+    def command(self) -> Command | None:
+        values = self.values
+        try:
+            return Command(float(values[f"{self.id}_xgoal"]), float(values[f"{self.id}_ygoal"]), bool(values[f"{self.id}_status"]))
+        except (KeyError, TypeError, ValueError):
+            return None  # not all goal tags have arrived yet
+
+    def peers(self) -> PeerView:
+        get = self.values.get
+        return PeerView(self.ids, [[get(f"{robot_id}_{tag}") for tag in PEER_TAGS] for robot_id in self.ids])
+
+    async def publish(self, report: Report) -> None:
+        self._seq += 1
+        if report.status is not None and report.status_seq >= self._first_event:
+            self._status = (report.status_seq, report.status)
+        seq, status = self._status if self._status is not None else (0, None)
+        text = encode_report(self._seq, report, seq, status)
+        await self._report.write_value(ua.DataValue(ua.Variant(text, ua.VariantType.String)))
+
+
+class RobotAgent:
+    """Keeps one robot connected to a runtime: connect, register, drive, reconnect."""
+
+    def __init__(
+        self,
+        endpoint: str,
+        robot_id: str,
+        robots: RobotFile,
+        floor: Floor,
+        *,
+        credentials: Credentials | None = None,
+        namespace: str = DEFAULT_NAMESPACE,
+        cycle: float = 0.1,
+        limits: SpeedLimits | None = None,
+        clock: Clock | None = None,
+        max_backoff: float = 5.0,
+    ) -> None:
+        try:
+            self.spec = robots[robot_id]
+        except KeyError:
+            raise KeyError(unknown_id_message("robot", robot_id, robots.ids)) from None
+        self.endpoint = endpoint
+        self.robots = robots
+        self.credentials = credentials or Credentials()
+        self.namespace = namespace
+        self.cycle = cycle
+        self.clock = clock or RealClock()
+        self.max_backoff = max_backoff
+        speed = limits or SpeedLimits(self.spec.max_linear_speed, self.spec.max_angular_speed)
+        self.driver = RobotDriver(self.spec, floor, speed, DriverSettings(), cycle=cycle)
+        self.connections = 0
+        self.connected = asyncio.Event()
+
+    async def run(self) -> None:
+        """Connect and drive forever, reconnecting with exponential backoff."""
+        backoff = 0.5
+        while True:
+            try:
+                await self._session()
+                backoff = 0.5
+            except asyncio.CancelledError:
+                raise
+            except Exception as error:  # any network or server failure: retry later
+                if self.connected.is_set():
+                    log.warning("robot %s: lost the runtime at %s (%s); reconnecting", self.spec.id, self.endpoint, _describe(error))
+                    backoff = 0.5
+                else:
+                    log.info("robot %s: cannot connect to %s (%s); retrying in %.1f s", self.spec.id, self.endpoint, _describe(error), backoff)
+            self.connected.clear()
+            await asyncio.sleep(backoff)  # network plumbing: real time, whatever the robot's clock
+            backoff = min(self.max_backoff, backoff * 2)
+
+    async def _session(self) -> None:
+        client = await self._client()
+        async with client:
+            namespace = await client.get_namespace_index(self.namespace)
+            robot_id = self.spec.id
+            io = SubscriptionIO(client, namespace, robot_id, self.robots.ids, self.driver.status_seq + 1)
+            names = [f"{robot_id}_{tag}" for tag in ("xgoal", "ygoal", "status")]
+            names += [f"{other}_{tag}" for other in self.robots.ids for tag in PEER_TAGS]
+            subscription = await client.create_subscription(50, io)
+            await subscription.subscribe_data_change([client.get_node(ua.NodeId(name, namespace)) for name in names], queuesize=1)
+            registration = Registration(
+                id=robot_id, name=self.spec.name, hardware=sorted(item.value for item in self.spec.hardware),
+                host=socket.gethostname(), pid=os.getpid(), software=f"softplc {__version__}", session=uuid.uuid4().hex[:12],
+            )
+            await client.get_node(ua.NodeId(f"{robot_id}_agent", namespace)).write_value(
+                ua.DataValue(ua.Variant(registration.encode(), ua.VariantType.String)))
+            self.connections += 1
+            self.connected.set()
+            log.info("robot %s: connected to %s and registered", robot_id, self.endpoint)
+            loop = ControlLoop(self.driver, io, self.clock, self.cycle)
+            watchdog = asyncio.ensure_future(self._watch(client))
+            driving = asyncio.ensure_future(loop.run())
+            try:
+                done, _ = await asyncio.wait({watchdog, driving}, return_when=asyncio.FIRST_COMPLETED)
+                for task in done:
+                    task.result()  # raises the failure that ended the session
+            finally:
+                for task in (watchdog, driving):
+                    task.cancel()
+                self.driver.v = self.driver.w = 0.0  # disconnected: the robot stands still
+
+    async def _watch(self, client: Client) -> None:
+        """End the session when the connection dies even if no write notices it."""
+        while True:
+            await asyncio.sleep(1.0)
+            await client.check_connection()
+
+    async def _client(self) -> Client:
+        credentials = self.credentials
+        client = Client(self.endpoint, timeout=4)
+        if credentials.user:
+            client.set_user(credentials.user)
+            client.set_password(credentials.password or "")
+        if credentials.certificate is not None and credentials.private_key is not None:
+            await _secure(client, credentials, user_login=not credentials.user)
+        return client
+
+
+async def _secure(client: Client, credentials: Credentials, *, user_login: bool) -> None:
+    """A signed (and encrypted) channel with the robot's certificate; optionally log in with it."""
+    from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+
+    assert credentials.certificate is not None and credentials.private_key is not None
+    certificate, key = str(credentials.certificate), str(credentials.private_key)
+    uri = _application_uri(credentials.certificate)
+    if uri:
+        client.application_uri = uri  # the server checks it against the certificate
+    if credentials.security != "None":
+        mode = ua.MessageSecurityMode.SignAndEncrypt if credentials.security.endswith("SignAndEncrypt") else ua.MessageSecurityMode.Sign
+        await client.set_security(SecurityPolicyBasic256Sha256, certificate, key, mode=mode)
+    if user_login:
+        await client.load_client_certificate(certificate)
+        await client.load_private_key(key)
+
+
+def _application_uri(path: Path) -> str:
+    """The URI in a certificate's subject alternative names ('' if none)."""
+    from cryptography import x509
+
+    data = path.read_bytes()
+    certificate = x509.load_pem_x509_certificate(data) if data.startswith(b"-----") else x509.load_der_x509_certificate(data)
+    try:
+        names = certificate.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    except x509.ExtensionNotFound:
+        return ""
+    uris = names.get_values_for_type(x509.UniformResourceIdentifier)
+    return uris[0] if uris else ""
+
+
+def _describe(error: BaseException) -> str:
+    text = str(error) or type(error).__name__
+    return text if len(text) < 200 else text[:200] + "..."
+
+
+# -- command line -------------------------------------------------------------------------------
+
+
+def add_agent_command(subparsers: Any) -> None:
+    agent = subparsers.add_parser(
+        "robot-agent",
+        help="run a robot's driver as a remote OPC UA client of a runtime",
+        description="Drive one robot from its own computer: connect to the runtime's OPC UA server, "
+        "register (robot id, name, hardware), follow the goals written to its tags and report its pose "
+        "every cycle. Reconnects with backoff when the runtime restarts. The robot must be declared "
+        "'driver: remote' in the runtime's robots.yaml.",
+        epilog="Example: softplc robot-agent --endpoint opc.tcp://127.0.0.1:4840/softplc/ --robot r01 "
+        f"--user r01 (password from ${PASSWORD_ENV}, --password-file or --password)",
+    )
+    agent.add_argument("--endpoint", required=True, metavar="URL", help="the runtime's OPC UA endpoint, opc.tcp://HOST:PORT/PATH")
+    agent.add_argument("--robot", required=True, metavar="ID", help="this robot's id in robots.yaml, e.g. r01")
+    agent.add_argument("--robots", default=DEFAULT_ROBOTS, metavar="FILE", help=f"robots file (default {DEFAULT_ROBOTS})")
+    agent.add_argument("--map", default=DEFAULT_MAP, metavar="FILE", help=f"map YAML (default {DEFAULT_MAP})")
+    agent.add_argument("--cycle", type=float, default=0.1, metavar="S", help="control cycle in seconds (default 0.1)")
+    agent.add_argument("--max-linear-speed", type=float, default=0.2, metavar="M/S", help="floor speed limit (default 0.2)")
+    agent.add_argument("--max-angular-speed", type=float, default=0.4, metavar="RAD/S", help="floor turn-rate limit (default 0.4)")
+    agent.add_argument("--namespace", default=DEFAULT_NAMESPACE, metavar="URI", help=f"namespace of the tags (default {DEFAULT_NAMESPACE})")
+    login = agent.add_argument_group("login (an operator user; anonymous sessions may only read)")
+    login.add_argument("--user", metavar="NAME", help="OPC UA user name")
+    login.add_argument("--password", metavar="PW", help=f"password (visible to other users of this machine: prefer ${PASSWORD_ENV} or --password-file)")
+    login.add_argument("--password-file", type=Path, metavar="FILE", help="read the password from the first line of FILE")
+    login.add_argument("--certificate", type=Path, metavar="CERT", help="client certificate (DER or PEM) for a signed/encrypted channel; "
+                       "without --user it also logs the robot in (softplc users add NAME --certificate ...)")
+    login.add_argument("--private-key", type=Path, metavar="KEY", help="the certificate's private key (PEM)")
+    login.add_argument("--security", choices=("None", "Basic256Sha256_Sign", "Basic256Sha256_SignAndEncrypt"),
+                       help="security policy (default SignAndEncrypt with a certificate, None without)")
+    agent.set_defaults(func=cmd_robot_agent)
+
+
+def cmd_robot_agent(args: argparse.Namespace) -> int:
+    if (args.certificate is None) != (args.private_key is None):
+        print("softplc robot-agent: --certificate and --private-key go together", file=sys.stderr)
+        return 1
+    password = args.password
+    if args.password_file is not None:
+        try:
+            password = args.password_file.read_text(encoding="utf-8").splitlines()[0]
+        except (OSError, IndexError) as error:
+            print(f"softplc robot-agent: cannot read --password-file {args.password_file}: {error}", file=sys.stderr)
+            return 1
+    if password is None:
+        password = os.environ.get(PASSWORD_ENV)
+    if args.user and password is None:
+        print(f"softplc robot-agent: --user {args.user} needs a password (${PASSWORD_ENV}, --password-file or --password)", file=sys.stderr)
+        return 1
+    security = args.security or ("Basic256Sha256_SignAndEncrypt" if args.certificate else "None")
+    if security != "None" and args.certificate is None:
+        print(f"softplc robot-agent: --security {security} needs --certificate and --private-key", file=sys.stderr)
+        return 1
+    robots = load_robots(args.robots)  # ConfigError → FILE:LINE:COL, printed by the CLI
+    if args.robot not in robots.ids:
+        print(f"softplc robot-agent: {unknown_id_message('robot', args.robot, robots.ids)} (in {args.robots})", file=sys.stderr)
+        return 1
+    floor = Floor(load_map(args.map))
+    spec = robots[args.robot]
+    limits = SpeedLimits(min(spec.max_linear_speed, args.max_linear_speed), min(spec.max_angular_speed, args.max_angular_speed))
+    credentials = Credentials(args.user, password, args.certificate, args.private_key, security)
+    agent = RobotAgent(args.endpoint, args.robot, robots, floor, credentials=credentials, namespace=args.namespace,
+                       cycle=args.cycle, limits=limits)
+    if getattr(args, "verbose", 0) < 2:
+        # asyncua logs a traceback for every lost connection; the agent says it in one line.
+        logging.getLogger("asyncua").setLevel(logging.CRITICAL)
+    print(f"robot-agent {args.robot} ({spec.name}): connecting to {args.endpoint}; Ctrl-C to stop", file=sys.stderr)
+    try:
+        asyncio.run(agent.run())
+    except KeyboardInterrupt:
+        return 130
+    return 0

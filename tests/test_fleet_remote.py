@@ -1,0 +1,121 @@
+"""A remote robot agent in its own process drives a robot over OPC UA, survives a runtime restart,
+and its tags are BAD while it is away."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from urllib.parse import urlparse
+
+import pytest
+
+from softplc.clock import RealClock
+from softplc.config import load_config
+from softplc.fleet.adapter import FleetAdapter
+from softplc.fleet.gridmap import load_map
+from softplc.fleet.robots import load_robots
+from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
+from softplc.runtime import Runtime
+from softplc.tags import Quality
+
+from conftest import REPO
+from fleet_support import robot_yaml, write_plant
+
+MAP = REPO / "robots" / "maps" / "factory.yaml"
+PASSWORD = "robot-pass-123"
+
+
+async def wait_for(condition: Callable[[], bool], timeout: float, what: str) -> float:
+    """Poll every 10 ms until `condition()` holds; fail with `what` after `timeout` seconds."""
+    start = time.monotonic()
+    while not condition():
+        if time.monotonic() - start > timeout:
+            raise AssertionError(f"timed out after {timeout} s waiting for: {what}")
+        await asyncio.sleep(0.01)
+    return time.monotonic() - start
+
+
+async def start_runtime(tagdb: Path, endpoint: str) -> tuple[Runtime, OpcUaServer, FleetAdapter]:
+    config = load_config(tagdb)
+    runtime = Runtime(config, RealClock(), state_dir=tagdb.parent / "state")
+    server = OpcUaServer(OpcUaSettings(endpoint=endpoint))
+    fleet = FleetAdapter(load_robots(tagdb.parent / "robots.yaml"), load_map(MAP), heartbeat_timeout=1.0)
+    runtime.add_adapter(fleet)
+    runtime.add_adapter(server)
+    await runtime.start()
+    return runtime, server, fleet
+
+
+def arrived(runtime: Runtime, robot: str, x: float, y: float) -> bool:
+    db = runtime.db
+    return (db.value(f"{robot}_navstate") == "arrived" and not db.value(f"{robot}_status")
+            and abs(db.value(f"{robot}_xpos") - x) < 0.5 and abs(db.value(f"{robot}_ypos") - y) < 0.5)
+
+
+@pytest.fixture
+def plant(tmp_path: Path) -> Path:
+    tagdb = write_plant(tmp_path, [robot_yaml("r01", 7.925, 5.925, driver="remote"), robot_yaml("r02", 7.925, 2.925)])
+    (tmp_path / "state").mkdir()
+    UserStore(tmp_path / "state" / "users.yaml").add("r01", Role.OPERATOR, PASSWORD)
+    return tagdb
+
+
+async def test_remote_agent_registers_moves_survives_restart_and_goes_bad_when_gone(plant: Path) -> None:
+    runtime, server, fleet = await start_runtime(plant, "opc.tcp://127.0.0.1:0/softplc/")
+    db = runtime.db
+    # Before any agent connected, the remote robot's published tags are BAD.
+    await wait_for(lambda: db["r01_xpos"].quality is Quality.BAD, 2, "r01 tags BAD before the agent connects")
+    env = dict(os.environ, PYTHONPATH=str(REPO), SOFTPLC_PASSWORD=PASSWORD)
+    agent = subprocess.Popen(
+        [sys.executable, "-m", "softplc.cli", "robot-agent", "--endpoint", server.endpoint, "--robot", "r01",
+         "--robots", str(plant.parent / "robots.yaml"), "--map", str(MAP), "--user", "r01"],
+        cwd=plant.parent, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )
+    try:
+        await wait_for(lambda: db.value("r01_online"), 30, "the agent to register and report")
+        assert db["r01_xpos"].quality is Quality.GOOD
+        registration = fleet.remotes["r01"].registration
+        assert registration is not None and registration.host == socket.gethostname() and registration.pid == agent.pid
+        assert "gripper" in registration.hardware
+
+        # It drives to a goal written to its tags, and clears its status there.
+        db.submit([("r01_xgoal", 8.925), ("r01_ygoal", 5.925), ("r01_status", True)], "test")
+        await wait_for(lambda: db.value("r01_navstate") == "moving", 5, "r01 moving")
+        await wait_for(lambda: arrived(runtime, "r01", 8.925, 5.925), 30, "r01 at (8.925, 5.925)")
+        before_restart = db.value("r01_xpos")
+
+        # The runtime restarts on the same port; the agent reconnects with backoff.
+        port = urlparse(server.endpoint).port
+        await runtime.stop()
+        runtime, server, fleet = await start_runtime(plant, f"opc.tcp://127.0.0.1:{port}/softplc/")
+        db = runtime.db
+        await wait_for(lambda: db["r01_xpos"].quality is Quality.BAD, 2, "r01 tags BAD while the agent is away")
+        assert not db.value("r01_online")
+        await wait_for(lambda: db.value("r01_online"), 30, "the agent to reconnect")
+        await wait_for(lambda: db["r01_xpos"].quality is Quality.GOOD, 2, "r01 tags GOOD again")
+        # The robot stayed where it was: its pose comes from the agent, not the restarted tags.
+        assert abs(db.value("r01_xpos") - before_restart) < 0.3
+        db.submit([("r01_xgoal", 8.925), ("r01_ygoal", 4.925), ("r01_status", True)], "test")
+        await wait_for(lambda: arrived(runtime, "r01", 8.925, 4.925), 40, "r01 at (8.925, 4.925) after the restart")
+
+        # The agent dies: after the heartbeat timeout its tags go BAD and it is offline.
+        agent.send_signal(signal.SIGKILL)
+        agent.wait(10)
+        waited = await wait_for(lambda: db["r01_xpos"].quality is Quality.BAD, 5, "r01 tags BAD after the agent died")
+        assert waited > 0.5  # not at once: only after the heartbeat timeout (1 s)
+        assert not db.value("r01_online")
+        assert db["r02_xpos"].quality is Quality.GOOD  # the simulated robot is unaffected
+    finally:
+        if agent.poll() is None:
+            agent.kill()
+            agent.wait(10)
+        await runtime.stop()
+        output = agent.stdout.read() if agent.stdout else ""
+        print(output[-3000:])
