@@ -12,12 +12,8 @@ runs right after it. In the common case it returns at once without yielding.
 from __future__ import annotations
 
 import asyncio
-import functools
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
-
-from asyncua import ua
-from asyncua.server.subscription_service import SubscriptionService
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from softplc.runtime import Runtime
@@ -59,29 +55,3 @@ class ScanGuard:
             # Sleep through the release (or just yield if it is due): the cycle runs first.
             await asyncio.sleep(max(0.0, remaining))
 
-
-class GuardedSubscriptionService(SubscriptionService):
-    """asyncua's subscription service whose subscriptions publish only when clear of the scan."""
-
-    def __init__(self, *args: Any, guard: ScanGuard, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.guard = guard
-
-    async def create_subscription(self, params: ua.CreateSubscriptionParameters, callback: Any, session_id: ua.NodeId,
-                                  request_callback: Any = None) -> ua.CreateSubscriptionResult:
-        result = await super().create_subscription(params, callback, session_id, request_callback=request_callback)
-        subscription = self.subscriptions[result.SubscriptionId]
-        # Both the subscription's own timer and an arriving Publish request call publish_results.
-        # Its publishing loop has not run yet (it starts at the next loop turn), so no publish
-        # escapes the guard.
-        subscription.publish_results = _guarded(subscription.publish_results, self.guard)  # type: ignore[method-assign]
-        return result
-
-
-def _guarded(publish: Callable[..., Any], guard: ScanGuard) -> Callable[..., Any]:
-    @functools.wraps(publish)
-    async def publish_results(*args: Any, **kwargs: Any) -> bool:
-        await guard.clear()
-        return await publish(*args, **kwargs)
-
-    return publish_results

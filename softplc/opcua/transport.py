@@ -35,7 +35,8 @@ from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
 from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua.ua_binary import uatcp_to_binary
 
-from softplc.opcua.scheduling import GuardedSubscriptionService, ScanGuard
+from softplc.opcua.scheduling import ScanGuard
+from softplc.opcua.subscriptions import GuardedSubscriptionService
 from softplc.opcua.security import SecuredChannels
 
 log = logging.getLogger(__name__)
