@@ -140,7 +140,12 @@ def _print_problems(error: ConfigError, stream: TextIO | None = None) -> None:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
+    from softplc.adapters import build_adapters
+
     config = load_config(args.config)
+    # Building (not starting) the adapters checks what only they know: the Modbus address
+    # map, OPC UA security settings, the fleet's robots, tasks and map files.
+    build_adapters(config, None)
     print(f"{args.config}: OK — {summary(config)}")
     return EXIT_OK
 
