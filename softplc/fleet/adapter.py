@@ -8,6 +8,7 @@ publishes their reports to their tags and marks those tags BAD while the agent i
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
 from collections.abc import Sequence
 from pathlib import Path
@@ -40,20 +41,21 @@ PHASES = 10  # robots' cycles are spread over this many slots of the cycle (smoo
 
 
 class SharedPeers:
-    """One PeerView per instant, shared by every in-process robot (read from the tags)."""
+    """One PeerView shared by every in-process robot, kept up to date from tag changes."""
 
-    def __init__(self, db: TagDatabase, ids: Sequence[str], now: Any) -> None:
-        self._db = db
-        self._ids = list(ids)
-        self._now = now
-        self._at = -1.0
-        self._view: PeerView | None = None
+    def __init__(self, db: TagDatabase, ids: Sequence[str]) -> None:
+        self._slots = {f"{robot_id}_{tag}": (index, tag) for index, robot_id in enumerate(ids) for tag in PEER_TAGS}
+        self._view = PeerView.from_tags(list(ids), db.value)
+        self.unsubscribe = db.on_change(self._changed)
+
+    def _changed(self, tags: Sequence[Tag]) -> None:
+        slots, view = self._slots, self._view
+        for tag in tags:
+            slot = slots.get(tag.name)
+            if slot is not None:
+                view.update(slot[0], slot[1], tag.value)
 
     def get(self) -> PeerView:
-        now = self._now()
-        if self._view is None or now != self._at:
-            self._view = PeerView.from_tags(self._ids, self._db.value)
-            self._at = now
         return self._view
 
 
@@ -201,6 +203,7 @@ class FleetAdapter:
         self._runtime: Runtime | None = None
         self._tasks: list[asyncio.Task[Any]] = []
         self._unsubscribe: Any = None
+        self._cleanup: list[Any] = []
         self._watch: dict[str, tuple[RemoteLink, str]] = {}
 
     @classmethod
@@ -236,8 +239,11 @@ class FleetAdapter:
                 raise AdapterError(f"fleet: {self.robots.location(robot.id, 'start')}: robot {robot.id} starts at "
                                    f"({robot.start.x:g}, {robot.start.y:g}), which is not free floor for its size on the map")
         ids = self.robots.ids
+        for robot in self.robots:
+            self.floor.planner(robot.radius)  # inflate the map for every robot size now, not mid-run
         db.submit([(f"{robot.id}_radius", robot.radius) for robot in self.robots], "fleet", client=False)
-        peers = SharedPeers(db, ids, runtime.clock.now)
+        peers = SharedPeers(db, ids)
+        self._cleanup.append(peers.unsubscribe)
         limits = {robot.id: self.limits(robot) for robot in self.robots}
         sim = [robot for robot in self.robots if robot.driver is DriverKind.SIM]
         for index, robot in enumerate(sim):
@@ -259,6 +265,9 @@ class FleetAdapter:
         if self.remotes:
             self._unsubscribe = db.on_change(self._on_change)
             self._tasks.append(runtime.spawn(self._heartbeats(), "fleet-heartbeats"))
+        # The maps, planners and robots live as long as the runtime: keep them out of the
+        # garbage collector's full passes (a full pass over them stalled the loop for >100 ms).
+        gc.freeze()
 
     async def stop(self) -> None:
         for task in self._tasks:
@@ -272,6 +281,9 @@ class FleetAdapter:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
+        for unsubscribe in self._cleanup:
+            unsubscribe()
+        self._cleanup.clear()
 
     def describe(self) -> str:
         remote = len([r for r in self.robots if r.driver is DriverKind.REMOTE])

@@ -229,7 +229,7 @@ class RobotDriver:
         self._set_status(now, True)
         self._set_state(NavState.PLANNING)
         # Parked robots are obstacles from the start; moving ones are handled on the way.
-        discs = self.traffic.parked(self.pose, peers, self.planner.resolution)
+        discs = self.traffic.parked(self.pose, goal, peers, self.planner.resolution)
         self._request_plan(PlanRequest(0, self.planner, (self.pose.x, self.pose.y), goal, discs))
 
     def _request_plan(self, request: PlanRequest) -> None:

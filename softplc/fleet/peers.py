@@ -76,6 +76,25 @@ class PeerView:
     def __len__(self) -> int:
         return len(self.ids)
 
+    def update(self, position: int, tag: str, value: Any) -> None:
+        """Take one changed tag value (`tag` is one of PEER_TAGS) of the robot at `position`."""
+        if tag == "xpos":
+            self.x[position] = _number(value)
+        elif tag == "ypos":
+            self.y[position] = _number(value)
+        elif tag == "heading":
+            self.heading[position] = _number(value)
+        elif tag == "speed":
+            self.speed[position] = _number(value)
+        elif tag == "navstate":
+            self.active[position] = value in ACTIVE_STATES
+        elif tag == "radius":
+            self.radius[position] = _number(value) or 0.2
+        elif tag == "route":
+            self.routes[position] = value if isinstance(value, str) else ""
+        elif tag == "navreason":
+            self.reasons[position] = value if isinstance(value, str) else ""
+
     def peer(self, position: int) -> Peer:
         robot_id = self.ids[position]
         return Peer(

@@ -63,6 +63,8 @@ class Traffic:
             if peer.id == previous:
                 limit += settings.hysteresis
             gap = math.hypot(peer.x - pose.x, peer.y - pose.y)
+            if gap - (abs(verdict.v) + (peer.speed if peer.active else 0.0)) * settings.horizon >= limit:
+                continue  # too far to meet within the horizon, whatever either does
             stay = self.min_distance(pose, peer, 0.0, 0.0)
             go = self.min_distance(pose, peer, verdict.v, w) if verdict.v else stay
             if not (go < limit and go < stay - 1e-4):
@@ -97,9 +99,15 @@ class Traffic:
         gap = math.hypot(peer.x - pose.x, peer.y - pose.y)
         return Disc(peer.x, peer.y, max(0.0, min(radius, gap - 1.5 * resolution)))
 
-    def parked(self, pose: Pose, peers: PeerView, resolution: float) -> list[Disc]:
-        """Every parked robot on the floor, as obstacles for a new trip."""
-        return [self.disc(pose, peer, resolution) for peer in peers.near(self.id, pose.x, pose.y, math.inf) if not peer.active]
+    def parked(self, pose: Pose, goal: tuple[float, float], peers: PeerView, resolution: float) -> list[Disc]:
+        """Parked robots near the way to `goal`, as obstacles for a new trip.
+
+        Only those within reach of the straight line's midpoint count: a path rarely strays
+        farther, and one that does meets them with the local traffic check instead.
+        """
+        mid_x, mid_y = (pose.x + goal[0]) / 2, (pose.y + goal[1]) / 2
+        reach = math.hypot(goal[0] - pose.x, goal[1] - pose.y) / 2 + self.settings.sense_range
+        return [self.disc(pose, peer, resolution) for peer in peers.near(self.id, mid_x, mid_y, reach) if not peer.active]
 
     def demanding(self, pose: Pose, peers: PeerView) -> Peer | None:
         """A navigating robot with right of way that says it is waiting for us (in its navreason)."""
