@@ -167,13 +167,17 @@ async def test_fleet_adapter_from_the_default_plant(tmp_path: Path) -> None:
     assert "3 robots (3 simulated, 0 remote)" in fleet.describe() and "21.95 x 8.60 m" in fleet.describe()
     await runtime.start()
     try:
-        await runtime.clock.sleep(1.0)
         for robot in fleet.robots:
-            assert runtime.db.value(f"{robot.id}_navstate") == "idle"
             assert (fleet.pose(robot.id).x, fleet.pose(robot.id).y) == (robot.start.x, robot.start.y)
-        runtime.db.submit([("r03_xgoal", 3.5), ("r03_ygoal", 7.5), ("r03_status", True)], "test")
-        await runtime.clock.sleep(2.0)
-        assert runtime.db.value("r03_navstate") == "moving"
+        # The default plant's sequencers and dispatcher send the robots to the stations.
+        await runtime.clock.sleep(60.0)
+        for robot in fleet.robots:
+            assert runtime.db.value(f"{robot.id}_radius") == pytest.approx(robot.radius)
+            trace = fleet.trajectory(robot.id)
+            assert len(trace) == pytest.approx(600, abs=2)
+            check_limits(trace, 0.2, 0.4)
+        assert any(s.navstate == "moving" for robot in fleet.robots for s in fleet.trajectory(robot.id))
+        assert all(stats.overruns == 0 for stats in fleet.stats().values())
     finally:
         await runtime.stop()
 
