@@ -153,7 +153,12 @@ def _schema_check(data: Any, source: SourceMap, schema: dict[str, Any]) -> tuple
 
 def _translate(error: jsonschema.ValidationError, path: tuple[Any, ...], source: SourceMap) -> list[Problem]:
     kind = error.validator
-    where = f"'{path[-1]}'" if path else "the file"
+    if not path:
+        where = "the file"
+    elif isinstance(path[-1], int):  # a list item: name the list, not the index
+        where = f"item {path[-1] + 1} of '{path[-2]}'" if len(path) > 1 else f"item {path[-1] + 1}"
+    else:
+        where = f"'{path[-1]}'"
     if kind == "additionalProperties":
         known = list(error.schema.get("properties", {}))
         unknown = [key for key in error.instance if key not in known]
