@@ -119,3 +119,52 @@ async def test_remote_agent_registers_moves_survives_restart_and_goes_bad_when_g
         await runtime.stop()
         output = agent.stdout.read() if agent.stdout else ""
         print(output[-3000:])
+
+
+def make_certificate(directory: Path, name: str) -> tuple[Path, Path, bytes]:
+    """A self-signed OPC UA client certificate (DER) and its key (PEM)."""
+    from asyncua.crypto.cert_gen import dump_private_key_as_pem, generate_private_key, generate_self_signed_app_certificate
+    from cryptography import x509
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    key = generate_private_key()
+    certificate = generate_self_signed_app_certificate(
+        key, name, {}, [x509.UniformResourceIdentifier(f"urn:softplc:robot:{name}"), x509.DNSName("localhost")],
+        extended=[ExtendedKeyUsageOID.CLIENT_AUTH], days=30,
+    )
+    der = certificate.public_bytes(serialization.Encoding.DER)
+    (directory / f"{name}.der").write_bytes(der)
+    (directory / f"{name}.key.pem").write_bytes(dump_private_key_as_pem(key))
+    return directory / f"{name}.der", directory / f"{name}.key.pem", der
+
+
+async def test_remote_agent_logs_in_with_its_certificate_over_an_encrypted_channel(plant: Path) -> None:
+    from softplc.opcua import Pki
+    from softplc.opcua.security import fingerprint
+
+    state = plant.parent / "state"
+    certificate, key, der = make_certificate(plant.parent, "r01")
+    Pki(state / "pki").trust(str(certificate))
+    UserStore(state / "users.yaml").add("r01", Role.OPERATOR, certificate=fingerprint(der))
+    config = load_config(plant)
+    runtime = Runtime(config, RealClock(), state_dir=state)
+    server = OpcUaServer(OpcUaSettings(endpoint="opc.tcp://127.0.0.1:0/softplc/", security=("Basic256Sha256_SignAndEncrypt",), anonymous="off"))
+    runtime.add_adapter(FleetAdapter(load_robots(plant.parent / "robots.yaml"), load_map(MAP), heartbeat_timeout=1.0))
+    runtime.add_adapter(server)
+    await runtime.start()
+    agent = subprocess.Popen(
+        [sys.executable, "-m", "softplc.cli", "robot-agent", "--endpoint", server.endpoint, "--robot", "r01",
+         "--robots", str(plant.parent / "robots.yaml"), "--map", str(MAP), "--certificate", str(certificate), "--private-key", str(key)],
+        cwd=plant.parent, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )
+    try:
+        db = runtime.db
+        await wait_for(lambda: db.value("r01_online"), 30, "the agent to log in with its certificate and report")
+        db.submit([("r01_xgoal", 7.925), ("r01_ygoal", 6.625), ("r01_status", True)], "test")
+        await wait_for(lambda: arrived(runtime, "r01", 7.925, 6.625), 30, "r01 at (7.925, 6.625)")
+    finally:
+        agent.kill()
+        agent.wait(10)
+        await runtime.stop()
+        print((agent.stdout.read() if agent.stdout else "")[-3000:])
