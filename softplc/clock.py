@@ -63,7 +63,7 @@ class RealClock(Clock):
     """Monotonic real time.
 
     `spin` is how long before a deadline `sleep_until` stops sleeping in the event loop and
-    approaches the deadline in short kernel naps between loop turns instead: event-loop timers fire late (asyncio's ~1-2 ms on a typical
+    spins (yielding to the loop) instead: event-loop timers fire late (asyncio's ~1-2 ms on a typical
     Linux VM: epoll's millisecond resolution and more; uvloop's ~0.3 ms early), which would
     dominate a 10 ms task's start latency. The margin adapts: it follows the recent worst
     lateness of the loop's timers plus 0.5 ms, between 0.5 ms and `max_spin`.
@@ -118,6 +118,11 @@ class RealClock(Clock):
 
     async def _sleep_until(self, deadline: float) -> None:
         remaining = deadline - self.now()
+        # A wait shorter than the margin (a 1 ms task) would be spun entirely, i.e. the CPU
+        # never rests; such waits nap in the kernel between loop turns instead. Longer waits
+        # spin only the last stretch, with loop turns in between: in a virtual machine a
+        # waking vCPU may take milliseconds, so a short spin is what makes a 10 ms task precise.
+        napping = remaining <= self.spin
         if remaining > self.spin:
             target = deadline - self.spin
             await asyncio.sleep(remaining - self.spin)
@@ -127,12 +132,11 @@ class RealClock(Clock):
         elif remaining <= 0:
             await asyncio.sleep(0)  # always give the loop a turn, as SimClock and asyncio.sleep(0) do
         while self.now() < deadline:
-            # The last stretch: give the loop a turn, then nap in the kernel (precise to ~0.1 ms)
-            # instead of burning the CPU. A busy spin would also use up the budget of a
-            # real-time process (--rt-priority), which Linux then throttles for 50 ms.
             await asyncio.sleep(0)
             remaining = deadline - self.now()
-            if remaining > 0:
+            if napping and remaining > 0:
+                # Spinning all the time would also use up a real-time process's budget
+                # (--rt-priority), and Linux then throttles it for 50 ms every second.
                 time.sleep(min(remaining, _NAP))
 
     async def run_blocking(self, function: Callable[..., T], *args: Any) -> T:
