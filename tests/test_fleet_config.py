@@ -62,7 +62,7 @@ def test_robot_file_errors_are_located_with_hints() -> None:
     with pytest.raises(ConfigError) as caught:
         parse_robots(ROBOT, "robots.yaml")
     assert problems(caught) == [
-        (9, 16, "unknown value 'laser_rangefinder' for '0' (did you mean 'laser_range_finder'?); "
+        (9, 16, "unknown value 'laser_rangefinder' for item 1 of 'hardware' (did you mean 'laser_range_finder'?); "
          "expected one of: laser_range_finder, camera, two_wheel_drive, sonar, gripper"),
         (11, 13, "unknown value 'simulated' for 'driver'; expected one of: sim, remote"),
         (14, 15, "'width_mm' must be a number, not string 'wide'"),

@@ -78,7 +78,9 @@ class PathPlanner:
         # A blocked border of one cell: neighbours never need bounds checks.
         self._padded = np.pad(blocked, 1, constant_values=True)
         self._stride = self._padded.shape[1]
-        self._static = self._padded.ravel().tolist()
+        # A bytearray, not a list: copying it per plan is a memcpy, and the garbage collector
+        # never walks it (a 600k-element list made each young-generation pass take ~50 ms).
+        self._static = bytearray(self._padded.ravel().astype(np.uint8).tobytes())
         self._labels, _ = ndimage.label(~blocked, structure=np.ones((3, 3), dtype=int))
         s = self._stride
         self._moves = [
@@ -155,17 +157,17 @@ class PathPlanner:
         result.seconds = time.perf_counter() - began
         return result
 
-    def _obstacles(self, start: int, goal: int | None, discs: Sequence[Disc], capsules: Sequence[Corridor]) -> list[bool]:
-        blocked = list(self._static)
+    def _obstacles(self, start: int, goal: int | None, discs: Sequence[Disc], capsules: Sequence[Corridor]) -> bytearray:
+        blocked = bytearray(self._static)
         protected = {start, goal}
         for disc in discs:
             for index in self._cells_near(disc.x, disc.y, disc.x, disc.y, disc.radius):
                 if index not in protected:
-                    blocked[index] = True
+                    blocked[index] = 1
         for capsule in capsules:
             for index in self._cells_near(capsule.x0, capsule.y0, capsule.x1, capsule.y1, capsule.radius):
                 if index not in protected:
-                    blocked[index] = True
+                    blocked[index] = 1
         return blocked
 
     def _refuge(self, start: tuple[float, float], discs: Sequence[Disc], keep_out: Sequence[Corridor]) -> Plan:
@@ -283,7 +285,7 @@ class PathPlanner:
         rows, cols = np.nonzero(near)
         return ((rows + iy0 + 1) * self._stride + (cols + ix0 + 1)).tolist()
 
-    def _astar(self, start: int, goal: int, blocked: list[bool], penalty: dict[int, float]) -> tuple[list[int] | None, int]:
+    def _astar(self, start: int, goal: int, blocked: bytearray, penalty: dict[int, float]) -> tuple[list[int] | None, int]:
         stride = self._stride
         gx, gy = goal % stride, goal // stride
         moves = self._moves
@@ -322,7 +324,7 @@ class PathPlanner:
                     heapq.heappush(heap, (new_cost + heuristic, new_cost, neighbour))
         return None, expanded
 
-    def _smooth(self, cells: list[int], blocked: list[bool], penalty: dict[int, float]) -> list[int]:
+    def _smooth(self, cells: list[int], blocked: bytearray, penalty: dict[int, float]) -> list[int]:
         """Drop waypoints that a straight line can skip (no obstacle, no penalised cell)."""
         if len(cells) <= 2:
             return cells
@@ -339,7 +341,7 @@ class PathPlanner:
             anchor = reach
         return result
 
-    def _visible(self, a: int, b: int, blocked: list[bool], penalty: dict[int, float]) -> bool:
+    def _visible(self, a: int, b: int, blocked: bytearray, penalty: dict[int, float]) -> bool:
         stride = self._stride
         ax, ay = a % stride, a // stride
         bx, by = b % stride, b // stride
