@@ -53,7 +53,10 @@ class SharedPeers:
         for tag in tags:
             slot = slots.get(tag.name)
             if slot is not None:
-                view.update(slot[0], slot[1], tag.value)
+                value = tag.value
+                if tag.quality is not Quality.GOOD and slot[1] in ("navstate", "speed"):
+                    value = "offline" if slot[1] == "navstate" else 0.0  # an absent robot stands where it was
+                view.update(slot[0], slot[1], value)
 
     def get(self) -> PeerView:
         return self._view
