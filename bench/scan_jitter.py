@@ -65,6 +65,7 @@ class Result:
     latency_ms: np.ndarray
     scan_ms: np.ndarray
     adapters: list[str]
+    steal: float  # share of CPU time the hypervisor took from this VM meanwhile (None if unknown)
 
     def figures(self, samples: np.ndarray) -> tuple[float, float, float, float]:
         p50, p99, p999 = np.percentile(samples, [50, 99, 99.9])
@@ -123,13 +124,25 @@ async def _measure(config_path: Path, interval: float, seconds: float, loop_name
         described = [adapter.describe() for adapter in runtime.adapters]
         await runtime.clock.sleep(WARMUP_S)  # servers settle, first plans are made
         cycles0, overruns0 = task.stats.cycles, task.stats.overruns
+        steal0 = _cpu_steal()
         measuring = True
         await runtime.clock.sleep(seconds)
         measuring = False
+        steal1 = _cpu_steal()
         cycles, overruns = task.stats.cycles - cycles0, task.stats.overruns - overruns0
     finally:
         await runtime.stop()
-    return Result(loop_name, interval, cycles, overruns, np.frombuffer(latency) * 1e3, np.frombuffer(scan) * 1e3, described)
+    steal = (steal1[0] - steal0[0]) / max(1, steal1[1] - steal0[1])
+    return Result(loop_name, interval, cycles, overruns, np.frombuffer(latency) * 1e3, np.frombuffer(scan) * 1e3, described, steal)
+
+
+def _cpu_steal() -> tuple[int, int]:
+    """(steal, total) CPU ticks from /proc/stat: a busy VM host shows up as steal."""
+    try:
+        fields = [int(x) for x in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]]
+    except (OSError, ValueError):
+        return (0, 0)
+    return fields[7], sum(fields)
 
 
 def run_case(config_path: Path, interval: float, seconds: float, loop_name: str, adapters_on: bool, state_dir: Path, realtime: bool = False) -> Result:
@@ -172,18 +185,24 @@ def main(argv: list[str] | None = None) -> int:
     if results:
         print(f"adapters running: {'; '.join(results[0].adapters) or 'none'}")
     print()
-    header = f"| loop | task | cycles | overruns | start latency ms p50 / p99 / p99.9 / max | scan ms p50 / p99 / max |"
+    header = "| loop | task | cycles | overruns | start latency ms p50 / p99 / p99.9 / max | scan ms p50 / p99 / max | VM steal |"
     print(header)
-    print("|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|")
     missed = []
     for r in results:
         lat = r.figures(r.latency_ms)
         sc = r.figures(r.scan_ms)
         print(f"| {r.loop} | {format_duration(r.interval)} | {r.cycles} | {r.overruns} | "
-              f"{lat[0]:.3f} / {lat[1]:.3f} / {lat[2]:.3f} / {lat[3]:.3f} | {sc[0]:.3f} / {sc[1]:.3f} / {sc[3]:.3f} |")
+              f"{lat[0]:.3f} / {lat[1]:.3f} / {lat[2]:.3f} / {lat[3]:.3f} | {sc[0]:.3f} / {sc[1]:.3f} / {sc[3]:.3f} | "
+              f"{r.steal * 100:.0f} % |")
         if r.goal_applies and not r.goal_met:
             missed.append(r)
     print()
+    busy = [r for r in results if r.steal > 0.05]
+    if busy:
+        worst = max(r.steal for r in busy)
+        print(f"note: the VM's host took up to {worst * 100:.0f} % of the CPU time (steal) during "
+              f"{len(busy)} case(s); their figures show the host's load more than softplc's")
     for r in missed:
         _, p99, _, worst = r.figures(r.latency_ms)
         print(f"!!! GOAL MISSED !!! {r.loop} 10ms task: start latency p99 {p99:.3f} ms (goal <= {GOAL_P99_MS} ms), "
