@@ -68,13 +68,13 @@ class RealClock(Clock):
     dominate a 10 ms task's start latency. The margin adapts: it follows the recent worst
     lateness of the loop's timers plus 0.5 ms, between 0.5 ms and `max_spin`.
 
-    Scan cycles come first: any other sleeper that wakes less than `guard` before the scan
+    Scan cycles come first: any other sleeper that wakes less than `guard` (5 ms) before the scan
     engine's next release (or after it, while that cycle has not run yet) waits until the cycle
     is done, and then runs in the gap before the following release. Without this, a robot's
     control step or the housekeeping due at the same moment as a 10 ms task would delay it.
     """
 
-    def __init__(self, spin: float = 0.0015, guard: float = 0.002, *, max_spin: float = 0.004) -> None:
+    def __init__(self, spin: float = 0.0015, guard: float = 0.005, *, max_spin: float = 0.004) -> None:
         self._origin = time.monotonic()
         self._wall_origin = time.time()
         self.spin = spin
