@@ -128,14 +128,22 @@ async def _serve_handshake(tmp_path: Path, protocol: str) -> tuple[Runtime, str]
 
 
 async def test_endpoint_opcua_against_a_second_runtime(tmp_path):
+    """Signed and encrypted, logged in as an operator, with a client certificate the server trusts."""
+    from softplc.latency.certificate import make_client_certificate
+    from softplc.opcua import Pki
+
+    certificate, key = make_client_certificate(tmp_path / "client")
+    Pki(tmp_path / "pki").trust(str(certificate))
     runtime, endpoint = await _serve_handshake(tmp_path, "opcua")
     try:
         code, stdout, stderr = await run_cli("latency", "--endpoint", endpoint, "--samples", "12", "--json",
+                                             "--security", f"SignAndEncrypt,{certificate},{key}",
                                              "--user", "tester", env={"SOFTPLC_LATENCY_PASSWORD": "handshake-test-password"})
         assert code == 0, stderr
         (run,) = json.loads(stdout)["runs"]
         check_run(run, "opcua", 12)
         assert run["local_runtime"] is False and run["endpoint"] == endpoint
+        assert "security SignAndEncrypt" in run["driver"]
         # The PLC counted exactly the switches the client reported.
         assert runtime.db.value("Handshakes") >= 12
     finally:

@@ -46,8 +46,10 @@ def add_commands(commands: argparse._SubParsersAction) -> None:  # type: ignore[
                         help="with --endpoint: where a role lives, e.g. ready=ns=4;s=MAIN.ROI_Ready or task_id=holding:1 "
                         "(roles: ready, task_id, delay, delay_scans, handshakes, ready_stamp; ROLE= drops one)")
     parser.add_argument("--namespace", metavar="URI", help="OPC UA namespace URI for {ns} in node ids (default: the server's last)")
-    parser.add_argument("--security", metavar="STRING", help="OPC UA security for the client, asyncua form: "
-                        "Basic256Sha256,SignAndEncrypt,CLIENT_CERT.pem,CLIENT_KEY.pem")
+    parser.add_argument("--security", metavar="MODE[,CERT,KEY]",
+                        help="OPC UA security: None, Sign or SignAndEncrypt (Basic256Sha256), optionally with the client "
+                        "certificate and key files; without them one is made (our runtime trusts it itself; another server "
+                        "must trust ~/.softplc/latency-client/latency-client.der)")
     parser.add_argument("--user", help="OPC UA user name (password from $SOFTPLC_LATENCY_PASSWORD)")
     parser.add_argument("--unit-id", type=int, default=1, help="Modbus unit id (default 1)")
     parser.add_argument("--word-order", choices=("big", "little"), default="big", help="Modbus word order of 32/64-bit values")
@@ -73,6 +75,12 @@ def targets(args: argparse.Namespace) -> list[Target]:
     _check_tags(args.tag, protocols)
     if args.protocol == "modbus" and args.client == "subscription":
         raise ValueError("Modbus has no subscriptions: leave out --client or use --client poll")
+    if args.security:
+        from softplc.latency.certificate import Security
+
+        if "opcua" not in protocols:
+            raise ValueError("--security is for OPC UA")
+        Security.parse(args.security)  # raises ValueError with the reason
     if args.scan <= 0:
         raise ValueError("--scan must be positive")
     if args.samples is not None and args.samples < 1:

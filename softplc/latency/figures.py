@@ -56,7 +56,7 @@ def _over_time(axis: plt.Axes, values: list[float], stats: DelayStatistics, titl
     if stats.std is not None:
         axis.axhline(stats.mean + stats.std, color="tab:orange", linewidth=1.0, linestyle="--",
                      label=f"mean + std {stats.mean + stats.std:.2f} ms")
-    axis.set_ylim(bottom=0)
+    axis.set_ylim(0, max(values) * 1.25)  # room for the legend above the highest sample
     axis.legend(loc="upper right", fontsize=8)
     axis.grid(alpha=0.3)
 

@@ -20,7 +20,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlparse
@@ -111,6 +111,7 @@ class Measurement:
     """Everything one run produced, counted."""
 
     target: Target
+    label: str = ""  # shown instead of the protocol in reports (e.g. a baseline's name)
     endpoint: str = ""
     same_clock: bool = False
     driver: str = ""
@@ -166,6 +167,8 @@ async def measure(target: Target, progress: Progress | None = None, stop: asynci
     result = Measurement(target, conditions=conditions(target))
     stop = stop or asyncio.Event()
     if target.endpoint is not None:
+        target = client_security(target)
+        result.target = target
         result.endpoint = target.endpoint
         result.same_clock = is_loopback(target.endpoint)
         await _run_client(target, result, progress, stop)
@@ -204,15 +207,43 @@ async def measure(target: Target, progress: Progress | None = None, stop: asynci
 
 
 def _with_opcua_login(target: Target, state_dir: Path) -> Target:
-    """Our OPC UA server lets anonymous clients only read: give the client an operator login."""
+    """Our OPC UA server lets anonymous clients only read: give the client an operator login
+    (and, for --security Sign/SignAndEncrypt, a client certificate the server trusts)."""
     import secrets
-    from dataclasses import replace
 
-    from softplc.opcua import DEFAULT_NAMESPACE, Role, UserStore
+    from softplc.latency.certificate import Security, make_client_certificate
+    from softplc.opcua import DEFAULT_NAMESPACE, Pki, Role, UserStore
 
     password = secrets.token_urlsafe(18)
     UserStore(state_dir / "users.yaml").add("latency", Role.OPERATOR, password)
-    return replace(target, user="latency", password=password, namespace=target.namespace or DEFAULT_NAMESPACE)
+    security = target.security
+    if security:
+        parsed = Security.parse(security)
+        if parsed.secured:
+            if parsed.certificate is None:
+                certificate, key = make_client_certificate(state_dir / "client")
+                parsed = Security(parsed.mode, certificate, key)
+            assert parsed.certificate is not None
+            Pki(state_dir / "pki").trust(str(parsed.certificate))
+            security = parsed.text()
+    return replace(target, user="latency", password=password, namespace=target.namespace or DEFAULT_NAMESPACE, security=security)
+
+
+def client_security(target: Target) -> Target:
+    """For --endpoint: a secured mode without a certificate uses ~/.softplc/latency-client (made once)."""
+    from softplc.latency.certificate import Security, make_client_certificate
+
+    if not target.security:
+        return target
+    parsed = Security.parse(target.security)
+    if not parsed.secured or parsed.certificate is not None:
+        return target
+    directory = Path.home() / ".softplc" / "latency-client"
+    certificate, key = directory / "latency-client.der", directory / "latency-client.pem"
+    if not (certificate.is_file() and key.is_file()):
+        certificate, key = make_client_certificate(directory)
+        log.warning("made OPC UA client certificate %s: the server must trust it before a %s session opens", certificate, parsed.mode)
+    return replace(target, security=Security(parsed.mode, certificate, key).text())
 
 
 async def _run_client(target: Target, result: Measurement, progress: Progress | None, stop: asyncio.Event) -> None:

@@ -1,8 +1,8 @@
 """The handshake over OPC UA (asyncua client): by subscription or by polling.
 
 Node ids are given per role; `{ns}` in a node id stands for the namespace index of
-`namespace` (a URI) or, when none is given, of the server's last namespace — a softplc
-server's tag namespace. Writes carry the node's own variant type (servers check it strictly).
+`namespace` (a URI) or, when none is given, of softplc's tag namespace (urn:softplc:tags) if
+the server has it, else of the server's last namespace. Writes carry the node's own variant type (servers check it strictly).
 """
 
 from __future__ import annotations
@@ -14,10 +14,14 @@ from typing import Any
 
 from asyncua import Client, Node, ua
 
+from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+
+from softplc.latency.certificate import MODES, Security, application_uri
 from softplc.latency.driver import REQUIRED_ROLES, TAG_NAMES, Driver, DriverError, PollingDriver, ReadyTracker, Snapshot
 
 log = logging.getLogger(__name__)
 
+SOFTPLC_NAMESPACE = "urn:softplc:tags"
 DEFAULT_NODE_IDS: dict[str, str] = {role: f"ns={{ns}};s={name}" for role, name in TAG_NAMES.items()}
 
 
@@ -59,7 +63,8 @@ class OpcuaDriver(PollingDriver):
         self._changed = asyncio.Event()
         self._ready_seen_at = 0.0
         mode = f"subscription, publishing interval {publishing_interval:g} ms" if subscription else f"polling every {poll_interval * 1e3:g} ms"
-        self.description = f"OPC UA {endpoint} ({mode})"
+        secured = security.split(",")[0] if security else "None"
+        self.description = f"OPC UA {endpoint} ({mode}; security {secured})"
 
     @property
     def serves(self) -> set[str]:
@@ -67,7 +72,7 @@ class OpcuaDriver(PollingDriver):
 
     async def connect(self) -> None:
         if self.security:
-            await self.client.set_security_string(self.security)
+            await self._secure(Security.parse(self.security))
         try:
             await self.client.connect()
         except Exception as error:
@@ -85,10 +90,22 @@ class OpcuaDriver(PollingDriver):
         if self.subscription:
             await self._subscribe()
 
+    async def _secure(self, security: Security) -> None:
+        if not security.secured:
+            return
+        if security.certificate is None or security.key is None:
+            raise DriverError("--security Sign/SignAndEncrypt needs the client certificate and key: MODE,CERT,KEY")
+        self.client.application_uri = application_uri(security.certificate)
+        try:
+            await self.client.set_security(SecurityPolicyBasic256Sha256, str(security.certificate), str(security.key), mode=MODES[security.mode])
+        except Exception as error:
+            raise DriverError(f"cannot set up {security.mode} security: {error!r}") from None
+
     async def _namespace_index(self) -> int:
         names = await self.client.get_namespace_array()
         if self.namespace is None:
-            return len(names) - 1
+            # softplc's tag namespace if the server has it, else the server's last one.
+            return names.index(SOFTPLC_NAMESPACE) if SOFTPLC_NAMESPACE in names else len(names) - 1
         if self.namespace not in names:
             raise DriverError(f"the server has no namespace {self.namespace!r}; it has: {', '.join(names)}")
         return names.index(self.namespace)

@@ -83,6 +83,7 @@ def to_json(measurement: Measurement) -> dict[str, Any]:
     plc = stats["plc"]
     ratios = {key: _ratio(getattr(plc, key), thesis[key]) for _, key, shown in ROWS if shown}
     return {
+        "label": measurement.label or _short(measurement),
         "protocol": target.protocol,
         "scenario": target.scenario,
         "scan_ms": target.scan * 1000.0,
@@ -170,6 +171,8 @@ def _print_table(scenario: str, runs: Sequence[Measurement], out: TextIO) -> Non
 
 
 def _short(run: Measurement) -> str:
+    if run.label:
+        return run.label
     name = {"opcua": "OPC UA", "modbus": "Modbus"}[run.target.protocol]
     if run.target.protocol == "opcua":
         name += " sub" if run.target.mode == "subscription" else " poll"

@@ -1,0 +1,181 @@
+"""Case IV handshake latency: softplc over OPC UA and Modbus beside a naive asyncua setup, same run.
+
+For one scenario and scan it measures, one after the other on this machine:
+  1. softplc, OPC UA (subscription client in its own process)      — `softplc latency --protocol opcua`
+  2. softplc, Modbus TCP (polling client in its own process)       — `softplc latency --protocol modbus`
+  3. the naive setup (bench/latency_naive.py): a plain asyncua server whose tags a Python loop
+     updates every scan, and a client polling every 10 ms with one read/write per tag, as the
+     thesis's program did.
+and prints Table 8 for all three beside the thesis, then checks the goals:
+
+  scan 10 ms: the PLC sees the answer at the next scan (10 ms) in >= 99 % of samples; worst <= 20 ms
+  scan 1 ms:  OPC UA high-resolution delay mean <= 3 ms, p99 <= 8 ms, worst <= 20 ms; Modbus mean <= 2 ms
+
+    .venv/bin/python bench/latency_baseline.py --scenario fast --samples 1000 --scan 10 [--out DIR]
+
+A goal missed prints GOAL MISSED. Other load on the machine distorts these figures: the load
+average is printed with each run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import socket
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from bench.latency_naive import NaiveServer  # noqa: E402
+from softplc.latency.measurement import Measurement, Sample, Target, conditions, measure  # noqa: E402
+from softplc.latency.report import print_report, to_json, write_csv  # noqa: E402
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now (a plain asyncua Server cannot report a port-0 bind)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+async def run_naive(scenario: str, scan: float, samples: int) -> Measurement:
+    """The naive server here, its client in its own process; joined on ReadyStamp."""
+    endpoint = f"opc.tcp://127.0.0.1:{free_port()}/naive/"
+    target = Target("opcua", scenario, scan, client_mode="poll", endpoint=endpoint, samples=samples, poll_interval_ms=10.0)
+    result = Measurement(target, label=f"naive {scan * 1000:g}ms", endpoint=endpoint, same_clock=True,
+                         driver="plain asyncua Server + Python loop; client polls read_value every 10 ms",
+                         conditions=conditions(target))
+    server = NaiveServer(endpoint, scenario, scan)
+    started, stop = asyncio.Event(), asyncio.Event()
+    server_task = asyncio.create_task(server.run(started, stop))
+    await asyncio.wait_for(started.wait(), 30)
+    began = time.monotonic()
+    process = await asyncio.create_subprocess_exec(
+        sys.executable, str(REPO / "bench" / "latency_naive.py"), "client", endpoint, "--samples", str(samples),
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+    result.client_pid = process.pid
+    events = []
+    assert process.stdout is not None
+    async for line in process.stdout:
+        event = json.loads(line)
+        events.append(event)
+        if event["type"] == "sample" and len(events) % 100 == 0:
+            print(f"  naive: {event['index']}/{samples}", file=sys.stderr, flush=True)
+    _, stderr = await process.communicate()
+    result.client_exit = process.returncode
+    result.wall_seconds = time.monotonic() - began
+    stop.set()
+    await server_task
+    by_stamp = {record.ready_stamp: record for record in server.records}
+    for event in events:
+        if event["type"] not in ("sample", "warmup"):
+            continue
+        record = by_stamp.get(event["ready_stamp"])
+        sample = Sample(event["index"], event["task_id"], "ok" if record or event["type"] == "warmup" else "missed",
+                        event["ready_stamp"], event["t_seen"], event["t_sent"], event["t_done"],
+                        record.delay_ms if record else None, record.loops if record else None, None)
+        (result.samples if event["type"] == "sample" else result.warmup).append(sample)
+        result.missed += sample.status == "missed" and event["type"] == "sample"
+    if result.client_exit != 0:
+        result.errors.append(f"naive client exited with {result.client_exit}: {stderr.decode()[-500:]}")
+    return result
+
+
+def check_goals(run: Measurement, scan_ms: float) -> list[str]:
+    """The goals of issue 6 for one of our runs: 'ok ...' or 'GOAL MISSED ...' lines."""
+    data = to_json(run)
+    name = data["label"]
+    lines: list[str] = []
+
+    def goal(ok: bool, text: str) -> None:
+        lines.append(("ok          " if ok else "GOAL MISSED ") + f"{name}: {text}")
+
+    if data["samples"] == 0:
+        goal(False, "no samples")
+        return lines
+    if data["missed"] or data["timeouts"] or data["errors"]:
+        goal(False, f"missed {data['missed']}, timeouts {data['timeouts']}, errors {data['errors']}")
+    if scan_ms == 10.0:
+        share = data["one_scan_percent"]
+        goal(share >= 99.0, f"seen at the next scan in {share:.2f} % of samples (goal >= 99 %)")
+        goal(data["plc"]["worst"] <= 20.0, f"worst PLC delay {data['plc']['worst']:.1f} ms (goal <= 20 ms)")
+    elif scan_ms == 1.0:
+        high = data["hires"]
+        if run.target.protocol == "opcua":
+            goal(high["mean"] <= 3.0, f"hi-res mean {high['mean']:.3f} ms (goal <= 3 ms)")
+            goal(high["percentiles"]["p99"] <= 8.0, f"hi-res p99 {high['percentiles']['p99']:.3f} ms (goal <= 8 ms)")
+            goal(high["worst"] <= 20.0, f"hi-res worst {high['worst']:.3f} ms (goal <= 20 ms)")
+        else:
+            goal(high["mean"] <= 2.0, f"hi-res mean {high['mean']:.3f} ms (goal <= 2 ms)")
+    return lines
+
+
+async def main_async(args: argparse.Namespace) -> list[Measurement]:
+    scan = args.scan / 1000.0
+    runs: list[Measurement] = []
+    for protocol in args.protocols.split(","):
+        print(f"softplc {protocol}, {args.scenario}, scan {args.scan:g} ms, {args.samples} samples ...", file=sys.stderr, flush=True)
+        target = Target(protocol, args.scenario, scan, samples=args.samples, loop=args.loop)
+        runs.append(await measure(target, _progress(protocol, args.samples)))
+    if not args.no_naive:
+        print(f"naive asyncua, {args.scenario}, loop every {args.scan:g} ms, {args.samples} samples ...", file=sys.stderr, flush=True)
+        runs.append(await run_naive(args.scenario, scan, args.samples))
+    return runs
+
+
+def _progress(name: str, total: int):  # type: ignore[no-untyped-def]
+    step = max(1, total // 10)
+
+    def show(run: Measurement) -> None:
+        done = len(run.samples)
+        if done and done % step == 0 and getattr(show, "last", -1) != done:
+            show.last = done  # type: ignore[attr-defined]
+            print(f"  {name}: {done}/{total} ({run.wall_seconds:.0f} s)", file=sys.stderr, flush=True)
+
+    return show
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", choices=("slow", "average", "fast"), default="fast")
+    parser.add_argument("--samples", type=int, default=1000)
+    parser.add_argument("--scan", type=float, default=10.0, metavar="MS")
+    parser.add_argument("--protocols", default="opcua,modbus", help="comma-separated: opcua,modbus")
+    parser.add_argument("--no-naive", action="store_true", help="leave out the naive baseline")
+    parser.add_argument("--loop", choices=("asyncio", "uvloop"), default="asyncio")
+    parser.add_argument("--out", type=Path, help="write statistics.json, samples.csv, report.txt here")
+    args = parser.parse_args()
+    load_before = os.getloadavg()
+    loop_factory = None
+    if args.loop == "uvloop":
+        import uvloop
+
+        loop_factory = uvloop.new_event_loop
+    with asyncio.Runner(loop_factory=loop_factory) as runner:
+        runs = runner.run(main_async(args))
+    print_report(runs, sys.stdout)
+    goals = [line for run in runs if not run.label.startswith("naive") for line in check_goals(run, args.scan)]
+    print("\nGoals (issue 6):")
+    for line in goals:
+        print("  " + line)
+    print(f"load average before {tuple(round(x, 2) for x in load_before)}, after {tuple(round(x, 2) for x in os.getloadavg())}")
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "statistics.json").write_text(json.dumps({"runs": [to_json(r) for r in runs]}, indent=2, default=lambda v: v.to_dict()))
+        write_csv(runs, args.out / "samples.csv")
+        with (args.out / "report.txt").open("w") as handle:
+            print_report(runs, handle)
+            handle.write("\n".join(goals) + "\n")
+    missed = [line for line in goals if line.startswith("GOAL MISSED")]
+    if missed:
+        print(f"\n*** GOAL MISSED: {len(missed)} of {len(goals)} goal checks failed ***", file=sys.stderr)
+    return 1 if missed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
