@@ -8,8 +8,8 @@ one JSON line per event on stdout with its `time.monotonic()` readings: when it 
 reported for that handshake (Delay, DelayScans, Handshakes, ReadyStamp). `softplc latency`
 starts it and reads these lines; nothing here knows about softplc's runtime.
 
-A handshake's PLC figures are published after the PLC saw the answer, so they are taken from
-the snapshot of the next Ready (or, for the last one, from the next change of Handshakes).
+After each answer, and outside the timed part, it waits until the PLC has taken it (Ready
+low, or Handshakes counted on) and reads the PLC's figures for that handshake in one request.
 The first answer is a warm-up: it may have been pending since before the client started.
 """
 
@@ -21,24 +21,12 @@ import json
 import os
 import sys
 import time
-from dataclasses import dataclass
 from typing import Any, Callable, TextIO
 
 from softplc.latency.driver import ROLES, Driver, DriverError, ReadyTracker, Snapshot
 
 Emit = Callable[[dict[str, Any]], None]
 MAX_CONSECUTIVE_TIMEOUTS = 3
-
-
-@dataclass
-class Pending:
-    """An answer whose PLC-side figures have not been read yet."""
-
-    index: int  # 0 = warm-up
-    task_id: int
-    ready: Snapshot
-    t_sent: float
-    t_done: float
 
 
 class HandshakeClient:
@@ -67,78 +55,68 @@ class HandshakeClient:
         next_task = first.task_id % 3 + 1 if first.task_id in (1, 2, 3) else 1
         self.emit({"type": "hello", "pid": os.getpid(), "driver": driver.description, "serves": sorted(driver.serves),
                    "task_id": first.task_id, "handshakes": first.handshakes, "t": time.monotonic()})
-        pending: Pending | None = None
+        before = first.handshakes  # the PLC's count before the next answer
         started = time.monotonic()
         consecutive = 0
         index = 0
-        while True:
-            if pending is not None and pending.index > 0 and self._finished(started):
-                break
+        while index == 0 or not self._finished(started):
             try:
                 ready = await driver.wait_ready(self.tracker, self.timeout)
             except TimeoutError as error:
                 self.timeouts += 1
                 consecutive += 1
-                now = await driver.read()
-                still_waiting = pending is not None and now.ready and now.ready_stamp == pending.ready.ready_stamp
-                self.emit({"type": "timeout", "index": index, "waited": self.timeout, "message": str(error),
-                           "plc_waiting_for_answer": still_waiting, "t": time.monotonic()})
+                self.emit({"type": "timeout", "index": index, "waited": self.timeout, "message": str(error), "t": time.monotonic()})
                 if consecutive >= MAX_CONSECUTIVE_TIMEOUTS:
                     raise DriverError(f"{consecutive} timeouts in a row: the PLC sets no Ready (is it running the handshake?)") from None
-                if still_waiting and pending is not None:
-                    # The PLC still shows the Ready we answered: it never took our TaskID.
-                    # Report that answer as missed and answer the same Ready again.
-                    self._report(pending, now)
-                    self.tracker = ReadyTracker()
-                    next_task = pending.task_id
-                    pending = None
                 continue
             consecutive = 0
+            # The timed part: from seeing Ready to the write's acknowledgement, nothing else.
             t_sent = time.monotonic()
             await driver.answer(next_task)
             t_done = time.monotonic()
             self.tracker.answered(ready)
-            if pending is not None:
-                self._report(pending, ready)
+            after = await driver.settle(ready, before, self.timeout)
+            starting = index == 0 and first.task_id not in (1, 2, 3)
+            status = self._report(index, next_task, ready, after, before, t_sent, t_done, starting)
+            before = after.handshakes
             if index > 0:
                 self.answers += 1
-            pending = Pending(index, next_task, ready, t_sent, t_done)
             index += 1
+            if status == "missed":
+                # The PLC never took this TaskID: answer the same Ready again, with the same task.
+                self.tracker = ReadyTracker()
+                driver.rearm()
+                continue
             next_task = next_task % 3 + 1
-        # The last answer's PLC figures: wait for the PLC to count it (or time out).
-        last = await driver.wait_change(pending.ready.handshakes, self.timeout)
-        self._report(pending, last)
         self.emit({"type": "done", "answers": self.answers, "timeouts": self.timeouts, "t": time.monotonic()})
 
-    def _report(self, pending: Pending, after: Snapshot) -> None:
-        """Emit the sample for `pending`, with the PLC's figures as read in `after`."""
-        before = pending.ready.handshakes
+    def _report(self, index: int, task_id: int, ready: Snapshot, after: Snapshot, before: int | None,
+                t_sent: float, t_done: float, starting: bool) -> str:
+        """Emit the sample of one answer, with the PLC's figures as read after it took the answer."""
         counted = None if before is None or after.handshakes is None else after.handshakes - before
-        if pending.ready.task_id == 0:
+        if starting:
             status = "start"  # TaskID 0 → 1 starts the sequence; the PLC neither times nor counts it
-        elif counted is None:
-            status = "ok"  # the PLC has no counter: take its Delay as ours
-        elif counted == 1:
-            status = "ok"
-        elif counted == 0:
-            status = "missed"  # the PLC did not take this TaskID
+        elif counted == 0 or (counted is None and after.ready):
+            # Not counted, or (no counter) Ready still up after the wait: our clear of Ready lands
+            # with the TaskID, so neither was applied.
+            status = "missed"
         else:
-            status = "ok"  # the PLC counted more switches than we made: someone else answered too
-        event: dict[str, Any] = {
-            "type": "warmup" if pending.index == 0 else "sample",
-            "index": pending.index,
-            "task_id": pending.task_id,
+            status = "ok"  # counted > 1: someone else answered too ("foreign")
+        self.emit({
+            "type": "warmup" if index == 0 else "sample",
+            "index": index,
+            "task_id": task_id,
             "status": status,
-            "ready_stamp": pending.ready.ready_stamp,
-            "t_seen": pending.ready.received,
-            "t_sent": pending.t_sent,
-            "t_done": pending.t_done,
+            "ready_stamp": ready.ready_stamp if ready.ready_stamp is not None else after.ready_stamp,
+            "t_seen": ready.received,
+            "t_sent": t_sent,
+            "t_done": t_done,
             "plc_handshakes": after.handshakes,
             "foreign": max(0, counted - 1) if counted is not None else 0,
             "plc_delay_ms": after.delay if status == "ok" else None,
             "plc_delay_scans": after.delay_scans if status == "ok" else None,
-        }
-        self.emit(event)
+        })
+        return status
 
 
 def build_driver(args: argparse.Namespace) -> Driver:

@@ -94,8 +94,12 @@ class Driver(ABC):
         """The first snapshot with a new Ready; raises TimeoutError after `timeout` seconds."""
 
     @abstractmethod
-    async def wait_change(self, handshakes: int | None, timeout: float) -> Snapshot:
-        """A snapshot whose Handshakes differs from `handshakes` (or the latest, at timeout)."""
+    async def settle(self, ready: Snapshot, handshakes: int | None, timeout: float) -> Snapshot:
+        """After an answer: a snapshot read once the PLC took it (Ready low, or Handshakes no longer
+        `handshakes`), or the latest one after `timeout`. Not timed: it carries the PLC's figures."""
+
+    def rearm(self) -> None:
+        """Treat the Ready showing now as new again (to answer a Ready the PLC did not take)."""
 
     @property
     def serves(self) -> set[str]:
@@ -118,10 +122,12 @@ class PollingDriver(Driver):
                 raise TimeoutError(f"no new Ready within {timeout:g} s")
             await asyncio.sleep(self.poll_interval)
 
-    async def wait_change(self, handshakes: int | None, timeout: float) -> Snapshot:
+    async def settle(self, ready: Snapshot, handshakes: int | None, timeout: float) -> Snapshot:
         deadline = time.monotonic() + timeout
         while True:
             snapshot = await self.read()
-            if snapshot.handshakes != handshakes or snapshot.received >= deadline:
+            if not snapshot.ready or (handshakes is not None and snapshot.handshakes != handshakes):
+                return snapshot
+            if snapshot.received >= deadline:
                 return snapshot
             await asyncio.sleep(self.poll_interval)
