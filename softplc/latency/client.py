@@ -75,19 +75,21 @@ class HandshakeClient:
             await driver.answer(next_task)
             t_done = time.monotonic()
             self.tracker.answered(ready)
-            after = await driver.settle(ready, before, self.timeout)
+            # The first answer to a PLC that has no task yet starts the sequence: nothing is counted.
             starting = index == 0 and first.task_id not in (1, 2, 3)
+            after = await driver.settle(ready, None if starting else before, self.timeout)
             status = self._report(index, next_task, ready, after, before, t_sent, t_done, starting)
             before = after.handshakes
             if index > 0:
                 self.answers += 1
             index += 1
-            if status == "missed":
-                # The PLC never took this TaskID: answer the same Ready again, with the same task.
+            if status == "missed" and after.ready:
+                # Ready is still up: the PLC took neither the TaskID nor the clear. Answer it again.
                 self.tracker = ReadyTracker()
                 driver.rearm()
-                continue
-            next_task = next_task % 3 + 1
+            # The next task follows the one the PLC holds (ours, unless it missed our answer).
+            current = after.task_id if after.task_id in (1, 2, 3) else next_task
+            next_task = current % 3 + 1
         self.emit({"type": "done", "answers": self.answers, "timeouts": self.timeouts, "t": time.monotonic()})
 
     def _report(self, index: int, task_id: int, ready: Snapshot, after: Snapshot, before: int | None,

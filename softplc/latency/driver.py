@@ -126,7 +126,8 @@ class PollingDriver(Driver):
         deadline = time.monotonic() + timeout
         while True:
             snapshot = await self.read()
-            if not snapshot.ready or (handshakes is not None and snapshot.handshakes != handshakes):
+            taken = snapshot.handshakes != handshakes if handshakes is not None else not snapshot.ready
+            if taken:
                 return snapshot
             if snapshot.received >= deadline:
                 return snapshot

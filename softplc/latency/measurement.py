@@ -165,14 +165,22 @@ def client_command(target: Target, endpoint: str) -> list[str]:
 async def measure(target: Target, progress: Progress | None = None, stop: asyncio.Event | None = None) -> Measurement:
     """Run one measurement to the end (or until the client dies, or `stop` is set) and count everything."""
     result = Measurement(target, conditions=conditions(target))
-    stop = stop or asyncio.Event()
+    cpu_start = cpu_counters()
+    try:
+        await _measure(target, result, progress, stop or asyncio.Event())
+    finally:
+        finish_conditions(result, cpu_start)
+    return result
+
+
+async def _measure(target: Target, result: Measurement, progress: Progress | None, stop: asyncio.Event) -> None:
     if target.endpoint is not None:
         target = client_security(target)
         result.target = target
         result.endpoint = target.endpoint
         result.same_clock = is_loopback(target.endpoint)
         await _run_client(target, result, progress, stop)
-        return result
+        return
     from softplc.adapters import build_adapters
     from softplc.clock import RealClock
     from softplc.runtime import Runtime
@@ -203,7 +211,6 @@ async def measure(target: Target, progress: Progress | None = None, stop: asynci
                                "start_latency_ms": task.stats.latency.summary(), "scan_ms": task.stats.scan.summary(),
                                "program_state": task.programs[0].state.value, "program_error": task.programs[0].error}
             await runtime.stop()
-    return result
 
 
 def _with_opcua_login(target: Target, state_dir: Path) -> Target:
@@ -356,6 +363,31 @@ async def _reconcile(target: Target, result: Measurement, last_handshakes: int |
         result.errors.append(f"cannot read the PLC after the client died: {error}")
     finally:
         await driver.close()
+
+
+def cpu_counters() -> list[int] | None:
+    """The machine's CPU time counters (Linux /proc/stat: user … steal), or None elsewhere."""
+    try:
+        with open("/proc/stat") as stat:
+            return [int(value) for value in stat.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+
+
+def finish_conditions(result: Measurement, start: list[int] | None) -> None:
+    """Add what the CPUs did during the run: busy (all processes) and stolen by the hypervisor."""
+    end = cpu_counters()
+    try:
+        result.conditions["load_average_end"] = [round(value, 2) for value in os.getloadavg()]
+    except OSError:
+        pass
+    if start is None or end is None:
+        return
+    delta = [b - a for a, b in zip(start, end)]
+    total = sum(delta) or 1
+    idle = delta[3] + delta[4]
+    result.conditions["cpu_busy_percent"] = round(100.0 * (total - idle) / total, 1)
+    result.conditions["cpu_steal_percent"] = round(100.0 * delta[7] / total, 1)
 
 
 def conditions(target: Target) -> dict[str, Any]:

@@ -185,14 +185,20 @@ class OpcuaDriver(PollingDriver):
     async def settle(self, ready: Snapshot, handshakes: int | None, timeout: float) -> Snapshot:
         if not self.subscription:
             return await super().settle(ready, handshakes, timeout)
-        # Ready goes low in the scan that applies our answer; then one Read gets the figures.
+        # Ready goes low in the scan that applies our answer; then a Read gets the figures. The
+        # server mirrors a scan's changes into its address space one by one, so Handshakes may
+        # show its new value a moment after Ready: read until it does (or the wait is over).
         deadline = time.monotonic() + timeout
         while self._latest.get("ready"):
             try:
                 await self._wait_push(deadline, "")
             except TimeoutError:
                 break
-        return await self.read()
+        while True:
+            snapshot = await self.read()
+            if handshakes is None or snapshot.handshakes != handshakes or snapshot.received >= deadline:
+                return snapshot
+            await asyncio.sleep(self.poll_interval)
 
     def rearm(self) -> None:
         self._answered_rises = self._rises - 1

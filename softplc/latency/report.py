@@ -219,9 +219,12 @@ def _print_details(run: Measurement, out: TextIO) -> None:
         latency = run.plc_task["start_latency_ms"]
         print(f"  PLC task: {run.plc_task['cycles']} cycles, {run.plc_task['overruns']} overruns, start latency mean "
               f"{latency['mean']:.3f} / p99 {latency['p99']:.3f} / max {latency['max']:.3f} ms", file=out)
-    load = run.conditions.get("load_average_1_5_15")
-    print(f"  conditions: {run.conditions.get('cpus')} CPUs, load average {load} at start, Python {run.conditions.get('python')}, "
-          f"{run.conditions.get('event_loop')} loop", file=out)
+    c = run.conditions
+    cpu = ""
+    if "cpu_busy_percent" in c:
+        cpu = f", CPUs {c['cpu_busy_percent']:g} % busy and {c['cpu_steal_percent']:g} % stolen by the hypervisor during the run"
+    print(f"  conditions: {c.get('cpus')} CPUs, load average {c.get('load_average_1_5_15')} at start{cpu}, "
+          f"Python {c.get('python')}, {c.get('event_loop')} loop", file=out)
 
 
 def _table(rows: list[list[str]], header: list[str], out: TextIO) -> None:
