@@ -32,7 +32,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bench.latency_naive import NaiveServer  # noqa: E402
-from softplc.latency.measurement import Measurement, Sample, Target, conditions, measure  # noqa: E402
+from softplc.latency.measurement import Measurement, Sample, Target, conditions, cpu_counters, finish_conditions, measure  # noqa: E402
 from softplc.latency.report import print_report, to_json, write_csv  # noqa: E402
 
 
@@ -50,6 +50,7 @@ async def run_naive(scenario: str, scan: float, samples: int) -> Measurement:
     result = Measurement(target, label=f"naive {scan * 1000:g}ms", endpoint=endpoint, same_clock=True,
                          driver="plain asyncua Server + Python loop; client polls read_value every 10 ms",
                          conditions=conditions(target))
+    cpu_start = cpu_counters()
     server = NaiveServer(endpoint, scenario, scan)
     started, stop = asyncio.Event(), asyncio.Event()
     server_task = asyncio.create_task(server.run(started, stop))
@@ -83,7 +84,26 @@ async def run_naive(scenario: str, scan: float, samples: int) -> Measurement:
         result.missed += sample.status == "missed" and event["type"] == "sample"
     if result.client_exit != 0:
         result.errors.append(f"naive client exited with {result.client_exit}: {stderr.decode()[-500:]}")
+    finish_conditions(result, cpu_start)
     return result
+
+
+def summary_rows(runs: list[Measurement]) -> list[str]:
+    """One markdown table row per run (what docs/benchmarks.md shows)."""
+    rows = ["| setup | samples | PLC mean / std / worst (ms) | at next scan | hi-res mean / p50 / p99 / worst (ms) | "
+            "Ready→seen mean | seen→acked mean | missed / timeouts | CPU steal |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for run in runs:
+        data = to_json(run)
+        plc, high = data["plc"], data["hires"]
+        share = data["one_scan_percent"]
+        steal = data["conditions"].get("cpu_steal_percent")
+        rows.append(
+            f"| {data['label']} | {data['samples']} | {plc['mean']:.1f} / {plc['std']:.1f} / {plc['worst']:.1f} | "
+            f"{share:.1f} % | {high['mean']:.2f} / {high['percentiles']['p50']:.2f} / {high['percentiles']['p99']:.2f} / "
+            f"{high['worst']:.2f} | {data['notify']['mean']:.2f} | {data['respond']['mean']:.2f} | "
+            f"{data['missed']} / {data['timeouts']} | {steal if steal is not None else '?'} % |")
+    return rows
 
 
 def check_goals(run: Measurement, scan_ms: float) -> list[str]:
@@ -160,6 +180,8 @@ def main() -> int:
         runs = runner.run(main_async(args))
     print_report(runs, sys.stdout)
     goals = [line for run in runs if not run.label.startswith("naive") for line in check_goals(run, args.scan)]
+    print()
+    print("\n".join(summary_rows(runs)))
     print("\nGoals (issue 6):")
     for line in goals:
         print("  " + line)
@@ -170,7 +192,7 @@ def main() -> int:
         write_csv(runs, args.out / "samples.csv")
         with (args.out / "report.txt").open("w") as handle:
             print_report(runs, handle)
-            handle.write("\n".join(goals) + "\n")
+            handle.write("\n".join(summary_rows(runs)) + "\n\n" + "\n".join(goals) + "\n")
     missed = [line for line in goals if line.startswith("GOAL MISSED")]
     if missed:
         print(f"\n*** GOAL MISSED: {len(missed)} of {len(goals)} goal checks failed ***", file=sys.stderr)
