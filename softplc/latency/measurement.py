@@ -20,11 +20,12 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlparse
 
+from softplc.latency.credentials import client_security, with_opcua_login
 from softplc.latency.plant import handshake_config, scenario_durations
 
 log = logging.getLogger(__name__)
@@ -189,7 +190,7 @@ async def _measure(target: Target, result: Measurement, progress: Progress | Non
         state = Path(state_dir)
         if target.protocol == "opcua":
             config = handshake_config(target.scenario, target.scan, opcua_endpoint="opc.tcp://127.0.0.1:0/softplc/")
-            target = _with_opcua_login(target, state)
+            target = with_opcua_login(target, state)
             result.target = target
         else:
             config = handshake_config(target.scenario, target.scan, modbus_port=0)
@@ -211,46 +212,6 @@ async def _measure(target: Target, result: Measurement, progress: Progress | Non
                                "start_latency_ms": task.stats.latency.summary(), "scan_ms": task.stats.scan.summary(),
                                "program_state": task.programs[0].state.value, "program_error": task.programs[0].error}
             await runtime.stop()
-
-
-def _with_opcua_login(target: Target, state_dir: Path) -> Target:
-    """Our OPC UA server lets anonymous clients only read: give the client an operator login
-    (and, for --security Sign/SignAndEncrypt, a client certificate the server trusts)."""
-    import secrets
-
-    from softplc.latency.certificate import Security, make_client_certificate
-    from softplc.opcua import DEFAULT_NAMESPACE, Pki, Role, UserStore
-
-    password = secrets.token_urlsafe(18)
-    UserStore(state_dir / "users.yaml").add("latency", Role.OPERATOR, password)
-    security = target.security
-    if security:
-        parsed = Security.parse(security)
-        if parsed.secured:
-            if parsed.certificate is None:
-                certificate, key = make_client_certificate(state_dir / "client")
-                parsed = Security(parsed.mode, certificate, key)
-            assert parsed.certificate is not None
-            Pki(state_dir / "pki").trust(str(parsed.certificate))
-            security = parsed.text()
-    return replace(target, user="latency", password=password, namespace=target.namespace or DEFAULT_NAMESPACE, security=security)
-
-
-def client_security(target: Target) -> Target:
-    """For --endpoint: a secured mode without a certificate uses ~/.softplc/latency-client (made once)."""
-    from softplc.latency.certificate import Security, make_client_certificate
-
-    if not target.security:
-        return target
-    parsed = Security.parse(target.security)
-    if not parsed.secured or parsed.certificate is not None:
-        return target
-    directory = Path.home() / ".softplc" / "latency-client"
-    certificate, key = directory / "latency-client.der", directory / "latency-client.pem"
-    if not (certificate.is_file() and key.is_file()):
-        certificate, key = make_client_certificate(directory)
-        log.warning("made OPC UA client certificate %s: the server must trust it before a %s session opens", certificate, parsed.mode)
-    return replace(target, security=Security(parsed.mode, certificate, key).text())
 
 
 async def _run_client(target: Target, result: Measurement, progress: Progress | None, stop: asyncio.Event) -> None:
