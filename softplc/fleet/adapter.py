@@ -21,6 +21,8 @@ from softplc.fleet.floor import Floor
 from softplc.fleet.gridmap import OccupancyGrid, load_map
 from softplc.fleet.loop import ControlLoop, LoopStats, Sample
 from softplc.fleet.peers import PEER_TAGS, PeerView
+from softplc.fleet.planner import PathPlanner
+from softplc.fleet.planning import ClockPlanning, Planning, ProcessPlanning
 from softplc.fleet.protocol import Registration, decode_report
 from softplc.fleet.robots import DriverKind, Pose, RobotFile, RobotSpec, load_robots
 from softplc.fleet.settings import FleetSettings
@@ -208,6 +210,7 @@ class FleetAdapter:
         self._unsubscribe: Any = None
         self._cleanup: list[Any] = []
         self._watch: dict[str, tuple[RemoteLink, str]] = {}
+        self._planning: ProcessPlanning | None = None
 
     @classmethod
     def from_config(cls, config: PlantConfig, *, record: bool = False, **overrides: Any) -> FleetAdapter:
@@ -242,19 +245,27 @@ class FleetAdapter:
                 raise AdapterError(f"fleet: {self.robots.location(robot.id, 'start')}: robot {robot.id} starts at "
                                    f"({robot.start.x:g}, {robot.start.y:g}), which is not free floor for its size on the map")
         ids = self.robots.ids
+        planners: list[PathPlanner] = []  # one per robot size, the map inflated now, not mid-run
         for robot in self.robots:
-            self.floor.planner(robot.radius)  # inflate the map for every robot size now, not mid-run
+            planner = self.floor.planner(robot.radius)
+            if planner not in planners:
+                planners.append(planner)
         db.submit([(f"{robot.id}_radius", robot.radius) for robot in self.robots], "fleet", client=False)
         peers = SharedPeers(db, ids)
         self._cleanup.append(peers.unsubscribe)
         limits = {robot.id: self.limits(robot) for robot in self.robots}
         sim = [robot for robot in self.robots if robot.driver is DriverKind.SIM]
+        planning: Planning = ClockPlanning(runtime.clock)
+        if sim and not runtime.clock.simulated:
+            self._planning = ProcessPlanning(planners, planning)
+            await self._planning.start()
+            planning = self._planning
         for index, robot in enumerate(sim):
             pose = Pose(float(db.value(f"{robot.id}_xpos")), float(db.value(f"{robot.id}_ypos")), float(db.value(f"{robot.id}_heading")))
             driver = RobotDriver(robot, self.floor, limits[robot.id], self.driver_settings, cycle=self.cycle, pose=pose)
             record = self.trajectories.setdefault(robot.id, []) if self.record else None
             loop = ControlLoop(driver, TagIO(db, robot.id, peers), runtime.clock, self.cycle,
-                               phase=(index % PHASES) * self.cycle / PHASES, record=record)
+                               phase=(index % PHASES) * self.cycle / PHASES, record=record, planning=planning)
             self.drivers[robot.id] = driver
             self.loops[robot.id] = loop
             self._tasks.append(runtime.spawn(loop.run(), f"robot-{robot.id}"))
@@ -281,6 +292,9 @@ class FleetAdapter:
             except (asyncio.CancelledError, Exception):
                 pass
         self._tasks.clear()
+        if self._planning is not None:
+            self._planning.stop()
+            self._planning = None
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None

@@ -2,8 +2,9 @@
 
 Cycles are released on absolute deadlines (`start + k * cycle`); a cycle that ends after its
 next release skips the missed ones and counts them as overruns, like a PLC task. Planning runs
-through `clock.run_blocking` (an executor thread in real time, inline on the simulated clock)
-while the loop keeps cycling, so a 40 ms A* never stalls the robot or the event loop.
+through a `Planning` (a worker process in real time, inline on the simulated clock; see
+`softplc.fleet.planning`) while the loop keeps cycling, so a 40 ms A* never stalls the robot
+or the event loop.
 """
 
 from __future__ import annotations
@@ -16,9 +17,10 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from softplc.clock import Clock
-from softplc.fleet.driver import Command, PlanRequest, Report, RobotDriver, run_plan
+from softplc.fleet.driver import Command, PlanRequest, Report, RobotDriver
 from softplc.fleet.peers import PeerView
 from softplc.fleet.planner import Plan
+from softplc.fleet.planning import ClockPlanning, Planning
 
 log = logging.getLogger(__name__)
 
@@ -76,34 +78,35 @@ class ControlLoop:
     phase: float = 0.0
     record: list[Sample] | None = None
     stats: LoopStats = field(default_factory=LoopStats)
+    planning: Planning | None = None  # default: through the clock (inline when simulated, else a thread)
 
     async def run(self) -> None:
         clock = self.clock
         origin = clock.now() + self.phase
         k = 0
-        planning: asyncio.Task[Plan] | None = None
+        in_flight: asyncio.Task[Plan] | None = None
         planning_serial = 0
         while True:
             release = origin + k * self.cycle
             await clock.sleep_until(release)
             began = time.perf_counter()
             now = clock.now()
-            if planning is not None and planning.done():
-                plan = planning.result() if not planning.cancelled() and planning.exception() is None else None
+            if in_flight is not None and in_flight.done():
+                plan = in_flight.result() if not in_flight.cancelled() and in_flight.exception() is None else None
                 if plan is None:
-                    error = None if planning.cancelled() else planning.exception()
+                    error = None if in_flight.cancelled() else in_flight.exception()
                     plan = Plan(False, reason=f"planner error: {error!r}")
                 self._count_plan(plan.seconds)
                 self.driver.plan_done(planning_serial, plan, now)
-                planning = None
+                in_flight = None
             command = self.io.command()
             if command is not None:
                 report = self.driver.step(now, command, self.io.peers())
                 request = self.driver.take_plan_request()
                 if request is not None:
-                    if planning is not None:
-                        planning.cancel()  # superseded: its result would be ignored anyway
-                    planning, planning_serial = self._plan(request), request.serial
+                    if in_flight is not None:
+                        in_flight.cancel()  # superseded: its result would be ignored anyway
+                    in_flight, planning_serial = self._plan(request), request.serial
                 await self.io.publish(report)
                 if self.record is not None:
                     pose = self.driver.pose
@@ -121,7 +124,8 @@ class ControlLoop:
                 k += missed
 
     def _plan(self, request: PlanRequest) -> asyncio.Task[Plan]:
-        return asyncio.ensure_future(self.clock.run_blocking(run_plan, request))
+        planning = self.planning or ClockPlanning(self.clock)
+        return asyncio.ensure_future(planning.run(request))
 
     def _count_plan(self, seconds: float) -> None:
         self.stats.plans += 1

@@ -1,0 +1,109 @@
+"""Where robots' A* plans run: inline on the simulated clock, in a worker process in real time.
+
+A plan is pure Python and takes up to ~45 ms on the factory map. Run in a thread it holds the
+interpreter's lock (the GIL) all that time, and each time the event loop wants the lock back it
+waits up to the switch interval (5 ms): a 10 ms scan task then started 5-12 ms late whenever a
+robot planned (`bench/scan_jitter.py`). A worker process has an interpreter of its own, so the
+scan never waits for a plan. The planners (the inflated maps) are sent to the worker once, when
+it starts; each request carries only its start, goal and temporary obstacles.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import multiprocessing
+import os
+import signal
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from typing import Protocol
+
+from softplc.clock import Clock
+from softplc.fleet.driver import PlanRequest, run_plan
+from softplc.fleet.planner import Corridor, Disc, PathPlanner, Plan
+
+log = logging.getLogger(__name__)
+
+
+class Planning(Protocol):
+    """Runs plan requests without stalling the event loop."""
+
+    async def run(self, request: PlanRequest) -> Plan: ...
+
+
+@dataclass
+class ClockPlanning:
+    """Plans through `clock.run_blocking`: inline on the simulated clock (deterministic), a thread in real time."""
+
+    clock: Clock
+
+    async def run(self, request: PlanRequest) -> Plan:
+        return await self.clock.run_blocking(run_plan, request)
+
+
+# A request as it crosses to the worker: the planner is named by its index in the worker's list.
+_Transit = tuple[int, int, tuple[float, float], tuple[float, float], list[Disc], list[Corridor], bool, bool]
+
+_worker_planners: list[PathPlanner] = []
+
+
+def _start_worker(planners: list[PathPlanner]) -> None:
+    """Worker initialiser: keep the planners; normal scheduling; leave Ctrl-C to the runtime."""
+    global _worker_planners
+    _worker_planners = planners
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Under `softplc run --rt-priority` the worker would inherit SCHED_FIFO and could starve
+    # the scan on a small machine: planning is background work.
+    if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) != os.SCHED_OTHER:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+def _plan_in_worker(transit: _Transit) -> Plan:
+    index, serial, start, goal, discs, keep_out, detour, make_way = transit
+    return run_plan(PlanRequest(serial, _worker_planners[index], start, goal, discs, keep_out, detour, make_way))
+
+
+def _ready() -> bool:
+    return bool(_worker_planners)
+
+
+class ProcessPlanning:
+    """Plans in a worker process that holds a copy of every planner (see the module docstring).
+
+    A request for a planner the worker was not given (a robot size unknown at start) runs
+    through `fallback` instead.
+    """
+
+    def __init__(self, planners: Sequence[PathPlanner], fallback: Planning, *, workers: int = 1) -> None:
+        self._planners = list(planners)
+        self._index = {id(planner): index for index, planner in enumerate(self._planners)}
+        self._fallback = fallback
+        self._workers = workers
+        self._pool: ProcessPoolExecutor | None = None
+
+    async def start(self) -> None:
+        """Start the worker and wait until it holds the planners (about half a second)."""
+        # spawn, not fork: forking a process that runs an event loop and threads is unsafe.
+        self._pool = ProcessPoolExecutor(
+            self._workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_start_worker,
+            initargs=(self._planners,),
+        )
+        loop = asyncio.get_running_loop()
+        await asyncio.gather(*(loop.run_in_executor(self._pool, _ready) for _ in range(self._workers)))
+
+    async def run(self, request: PlanRequest) -> Plan:
+        index = self._index.get(id(request.planner))
+        if self._pool is None or index is None:
+            return await self._fallback.run(request)
+        transit: _Transit = (index, request.serial, request.start, request.goal, request.discs,
+                             request.keep_out, request.detour, request.make_way)
+        return await asyncio.get_running_loop().run_in_executor(self._pool, _plan_in_worker, transit)
+
+    def stop(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None

@@ -1,0 +1,69 @@
+"""Robots' plans in a worker process on the real clock (the scan never waits for an A*)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from softplc.clock import RealClock, SimClock
+from softplc.fleet.driver import PlanRequest, run_plan
+from softplc.fleet.floor import Floor
+from softplc.fleet.gridmap import load_map
+from softplc.fleet.planner import Disc, Plan
+from softplc.fleet.planning import ClockPlanning, ProcessPlanning
+
+from conftest import REPO
+from fleet_support import Plant, robot_yaml, write_plant
+
+FACTORY = REPO / "robots" / "maps" / "factory.yaml"
+
+
+class Recording:
+    """A fallback that notes what reached it."""
+
+    def __init__(self) -> None:
+        self.requests: list[PlanRequest] = []
+
+    async def run(self, request: PlanRequest) -> Plan:
+        self.requests.append(request)
+        return run_plan(request)
+
+
+async def test_the_worker_plans_exactly_what_an_inline_plan_gives() -> None:
+    floor = Floor(load_map(FACTORY))
+    known, unknown = floor.planner(0.18), floor.planner(0.39)
+    fallback = Recording()
+    planning = ProcessPlanning([known], fallback)
+    await planning.start()
+    try:
+        requests = [
+            PlanRequest(1, known, (7.925, 5.925), (18.5, 7.5)),
+            PlanRequest(2, known, (7.925, 5.925), (3.5, 7.5), [Disc(5.5, 6.5, 0.4)]),
+            PlanRequest(3, known, (7.925, 5.925), (12.5, 4.3)),  # inside the rack island: no plan
+        ]
+        for request in requests:
+            planned, inline = await planning.run(request), run_plan(request)
+            assert (planned.ok, planned.path, planned.reason) == (inline.ok, inline.path, inline.reason)
+        assert not planned.ok  # the last one
+        assert fallback.requests == []
+        other = PlanRequest(4, unknown, (7.925, 5.925), (18.5, 7.5))
+        assert (await planning.run(other)).ok
+        assert fallback.requests == [other]  # a planner the worker does not hold runs in the fallback
+    finally:
+        planning.stop()
+
+
+async def test_a_fleet_on_the_real_clock_plans_in_a_worker_process(tmp_path: Path) -> None:
+    tagdb = write_plant(tmp_path, [robot_yaml("r01", 7.925, 5.925)])
+    async with Plant(tagdb, load_map(FACTORY), RealClock()) as plant:
+        assert isinstance(plant.fleet._planning, ProcessPlanning)
+        plant.send("r01", 9.0, 5.925)
+        await plant.run_until(lambda: plant.fleet.stats()["r01"].plans >= 1, limit=20.0)
+        await plant.run_until(lambda: plant.db.value("r01_navstate") in ("moving", "arrived"), limit=5.0)
+    assert plant.fleet._planning is None  # stopped with the runtime
+
+
+async def test_simulated_fleets_plan_inline(tmp_path: Path) -> None:
+    tagdb = write_plant(tmp_path, [robot_yaml("r01", 7.925, 5.925)])
+    async with Plant(tagdb, load_map(FACTORY), SimClock()) as plant:
+        assert plant.fleet._planning is None
+        assert all(loop.planning is not None and isinstance(loop.planning, ClockPlanning) for loop in plant.fleet.loops.values())
