@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from softplc.config import PlantConfig
-from softplc.runtime import Adapter
+if TYPE_CHECKING:
+    from softplc.config import PlantConfig
+    from softplc.runtime import Adapter
 
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:

@@ -15,9 +15,7 @@ import sys
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
-
-import jsonschema
+from typing import TYPE_CHECKING, Any
 
 from softplc.datatypes import DataType, TypeMismatch
 from softplc.durations import parse_duration
@@ -26,6 +24,9 @@ from softplc.scan import RestartPolicy
 from softplc.schema import CONFIG_SCHEMA, NAME_PATTERN, NAME_RULE
 from softplc.tags import Access, TagDef
 from softplc.yamlsource import ConfigError, Location, Problem, SourceMap, load_yaml, parse_yaml
+
+if TYPE_CHECKING:
+    import jsonschema
 
 SYSTEM_PREFIX = "_sys."
 
@@ -135,6 +136,8 @@ def schema_problems(data: Any, source: SourceMap, schema: dict[str, Any]) -> lis
 
 def _schema_check(data: Any, source: SourceMap, schema: dict[str, Any]) -> tuple[list[Problem], set[tuple[Any, ...]]]:
     """The schema's problems, and the paths they are about (semantic checks skip those)."""
+    import jsonschema  # ~60 ms to import: only commands that load a configuration pay for it
+
     validator = jsonschema.Draft202012Validator(schema)
     problems: list[Problem] = []
     paths: set[tuple[Any, ...]] = set()

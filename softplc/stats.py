@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 
 class TimingSeries:
     """Samples of one timing quantity in seconds (e.g. a task's scan time)."""
 
     def __init__(self, window: int = 10_000) -> None:
+        import numpy as np  # on first use: `softplc --help` imports this module (via config) and must start fast
+
         self._window = np.zeros(window, dtype=np.float64)
         self.reset()
 
@@ -41,6 +41,8 @@ class TimingSeries:
 
     def percentile(self, q: float) -> float:
         """The q-th percentile (0–100) of the most recent samples (as np.percentile, linear)."""
+        import numpy as np
+
         n = self._filled
         if not n:
             return 0.0

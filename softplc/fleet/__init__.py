@@ -32,23 +32,45 @@ follows the path with pure pursuit within its own speed limits capped by the flo
 by id order. Robots learn about each other only through the tags.
 """
 
-from softplc.fleet.adapter import FleetAdapter
-from softplc.fleet.compat import (
-    Compatibility,
-    compatibility_matrix,
-    compatible,
-    compatible_robots,
-    compatible_tasks,
-    incompatibilities,
-)
-from softplc.fleet.controller import SpeedLimits
-from softplc.fleet.driver import DriverSettings, NavState, RobotDriver
-from softplc.fleet.floor import Floor
-from softplc.fleet.gridmap import OccupancyGrid, load_map
-from softplc.fleet.loop import Sample
-from softplc.fleet.planner import PathPlanner, Plan
-from softplc.fleet.robots import Hardware, Pose, RobotFile, RobotSpec, TaskFile, TaskSpec, load_robots, load_tasks
-from softplc.fleet.settings import FleetSettings
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from softplc.fleet.adapter import FleetAdapter
+    from softplc.fleet.compat import (
+        Compatibility,
+        compatibility_matrix,
+        compatible,
+        compatible_robots,
+        compatible_tasks,
+        incompatibilities,
+    )
+    from softplc.fleet.controller import SpeedLimits
+    from softplc.fleet.driver import DriverSettings, NavState, RobotDriver
+    from softplc.fleet.floor import Floor
+    from softplc.fleet.gridmap import OccupancyGrid, load_map
+    from softplc.fleet.loop import Sample
+    from softplc.fleet.planner import PathPlanner, Plan
+    from softplc.fleet.robots import Hardware, Pose, RobotFile, RobotSpec, TaskFile, TaskSpec, load_robots, load_tasks
+    from softplc.fleet.settings import FleetSettings
+
+# Public names and their modules, imported on first use (PEP 562): `softplc --help` imports
+# softplc.fleet.cli and must not load numpy, scipy and the planner with it.
+_MODULES = {
+    "softplc.fleet.adapter": ("FleetAdapter",),
+    "softplc.fleet.compat": (
+        "Compatibility", "compatibility_matrix", "compatible", "compatible_robots", "compatible_tasks", "incompatibilities",
+    ),
+    "softplc.fleet.controller": ("SpeedLimits",),
+    "softplc.fleet.driver": ("DriverSettings", "NavState", "RobotDriver"),
+    "softplc.fleet.floor": ("Floor",),
+    "softplc.fleet.gridmap": ("OccupancyGrid", "load_map"),
+    "softplc.fleet.loop": ("Sample",),
+    "softplc.fleet.planner": ("PathPlanner", "Plan"),
+    "softplc.fleet.robots": ("Hardware", "Pose", "RobotFile", "RobotSpec", "TaskFile", "TaskSpec", "load_robots", "load_tasks"),
+    "softplc.fleet.settings": ("FleetSettings",),
+}
+_EXPORTS = {name: module for module, names in _MODULES.items() for name in names}
 
 __all__ = [
     "Compatibility", "DriverSettings", "FleetAdapter", "FleetSettings", "Floor", "Hardware", "NavState",
@@ -56,3 +78,15 @@ __all__ = [
     "SpeedLimits", "TaskFile", "TaskSpec", "compatibility_matrix", "compatible", "compatible_robots",
     "compatible_tasks", "incompatibilities", "load_map", "load_robots", "load_tasks",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    globals()[name] = value  # the next lookup does not come here
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

@@ -12,12 +12,10 @@ exponential backoff; its driver (pose, path) survives the reconnection.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import logging
 import os
 import socket
-import sys
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,17 +28,14 @@ from softplc.clock import Clock, RealClock
 from softplc.fleet.controller import SpeedLimits
 from softplc.fleet.driver import Command, DriverSettings, Report, RobotDriver
 from softplc.fleet.floor import Floor
-from softplc.fleet.gridmap import load_map
 from softplc.fleet.loop import ControlLoop
 from softplc.fleet.peers import PEER_TAGS, PeerView
 from softplc.fleet.protocol import Registration, encode_report
-from softplc.fleet.robots import RobotFile, load_robots, unknown_id_message
-from softplc.fleet.settings import DEFAULT_MAP, DEFAULT_ROBOTS
+from softplc.fleet.robots import RobotFile, unknown_id_message
 
 log = logging.getLogger(__name__)
 
 DEFAULT_NAMESPACE = "urn:softplc:tags"
-PASSWORD_ENV = "SOFTPLC_PASSWORD"
 
 
 @dataclass
@@ -227,78 +222,3 @@ def _application_uri(path: Path) -> str:
 def _describe(error: BaseException) -> str:
     text = str(error) or type(error).__name__
     return text if len(text) < 200 else text[:200] + "..."
-
-
-# -- command line -------------------------------------------------------------------------------
-
-
-def add_agent_command(subparsers: Any) -> None:
-    agent = subparsers.add_parser(
-        "robot-agent",
-        help="run a robot's driver as a remote OPC UA client of a runtime",
-        description="Drive one robot from its own computer: connect to the runtime's OPC UA server, "
-        "register (robot id, name, hardware), follow the goals written to its tags and report its pose "
-        "every cycle. Reconnects with backoff when the runtime restarts. The robot must be declared "
-        "'driver: remote' in the runtime's robots.yaml.",
-        epilog="Example: softplc robot-agent --endpoint opc.tcp://127.0.0.1:4840/softplc/ --robot r01 "
-        f"--user r01 (password from ${PASSWORD_ENV}, --password-file or --password)",
-    )
-    agent.add_argument("--endpoint", required=True, metavar="URL", help="the runtime's OPC UA endpoint, opc.tcp://HOST:PORT/PATH")
-    agent.add_argument("--robot", required=True, metavar="ID", help="this robot's id in robots.yaml, e.g. r01")
-    agent.add_argument("--robots", default=DEFAULT_ROBOTS, metavar="FILE", help=f"robots file (default {DEFAULT_ROBOTS})")
-    agent.add_argument("--map", default=DEFAULT_MAP, metavar="FILE", help=f"map YAML (default {DEFAULT_MAP})")
-    agent.add_argument("--cycle", type=float, default=0.1, metavar="S", help="control cycle in seconds (default 0.1)")
-    agent.add_argument("--max-linear-speed", type=float, default=0.2, metavar="M/S", help="floor speed limit (default 0.2)")
-    agent.add_argument("--max-angular-speed", type=float, default=0.4, metavar="RAD/S", help="floor turn-rate limit (default 0.4)")
-    agent.add_argument("--namespace", default=DEFAULT_NAMESPACE, metavar="URI", help=f"namespace of the tags (default {DEFAULT_NAMESPACE})")
-    login = agent.add_argument_group("login (an operator user; anonymous sessions may only read)")
-    login.add_argument("--user", metavar="NAME", help="OPC UA user name")
-    login.add_argument("--password", metavar="PW", help=f"password (visible to other users of this machine: prefer ${PASSWORD_ENV} or --password-file)")
-    login.add_argument("--password-file", type=Path, metavar="FILE", help="read the password from the first line of FILE")
-    login.add_argument("--certificate", type=Path, metavar="CERT", help="client certificate (DER or PEM) for a signed/encrypted channel; "
-                       "without --user it also logs the robot in (softplc users add NAME --certificate ...)")
-    login.add_argument("--private-key", type=Path, metavar="KEY", help="the certificate's private key (PEM)")
-    login.add_argument("--security", choices=("None", "Basic256Sha256_Sign", "Basic256Sha256_SignAndEncrypt"),
-                       help="security policy (default SignAndEncrypt with a certificate, None without)")
-    agent.set_defaults(func=cmd_robot_agent)
-
-
-def cmd_robot_agent(args: argparse.Namespace) -> int:
-    if (args.certificate is None) != (args.private_key is None):
-        print("softplc robot-agent: --certificate and --private-key go together", file=sys.stderr)
-        return 1
-    password = args.password
-    if args.password_file is not None:
-        try:
-            password = args.password_file.read_text(encoding="utf-8").splitlines()[0]
-        except (OSError, IndexError) as error:
-            print(f"softplc robot-agent: cannot read --password-file {args.password_file}: {error}", file=sys.stderr)
-            return 1
-    if password is None:
-        password = os.environ.get(PASSWORD_ENV)
-    if args.user and password is None:
-        print(f"softplc robot-agent: --user {args.user} needs a password (${PASSWORD_ENV}, --password-file or --password)", file=sys.stderr)
-        return 1
-    security = args.security or ("Basic256Sha256_SignAndEncrypt" if args.certificate else "None")
-    if security != "None" and args.certificate is None:
-        print(f"softplc robot-agent: --security {security} needs --certificate and --private-key", file=sys.stderr)
-        return 1
-    robots = load_robots(args.robots)  # ConfigError → FILE:LINE:COL, printed by the CLI
-    if args.robot not in robots.ids:
-        print(f"softplc robot-agent: {unknown_id_message('robot', args.robot, robots.ids)} (in {args.robots})", file=sys.stderr)
-        return 1
-    floor = Floor(load_map(args.map))
-    spec = robots[args.robot]
-    limits = SpeedLimits(min(spec.max_linear_speed, args.max_linear_speed), min(spec.max_angular_speed, args.max_angular_speed))
-    credentials = Credentials(args.user, password, args.certificate, args.private_key, security)
-    agent = RobotAgent(args.endpoint, args.robot, robots, floor, credentials=credentials, namespace=args.namespace,
-                       cycle=args.cycle, limits=limits)
-    if getattr(args, "verbose", 0) < 2:
-        # asyncua logs a traceback for every lost connection; the agent says it in one line.
-        logging.getLogger("asyncua").setLevel(logging.CRITICAL)
-    print(f"robot-agent {args.robot} ({spec.name}): connecting to {args.endpoint}; Ctrl-C to stop", file=sys.stderr)
-    try:
-        asyncio.run(agent.run())
-    except KeyboardInterrupt:
-        return 130
-    return 0

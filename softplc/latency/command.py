@@ -9,10 +9,12 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-from softplc.latency.measurement import Measurement, Target, measure
 from softplc.latency.plant import SCENARIO_NAMES, PlantMissing, scenario_durations
+
+if TYPE_CHECKING:
+    from softplc.latency.measurement import Measurement, Target
 
 EXIT_OK, EXIT_FAILURE = 0, 1
 
@@ -63,6 +65,8 @@ def add_commands(commands: argparse._SubParsersAction) -> None:  # type: ignore[
 
 def targets(args: argparse.Namespace) -> list[Target]:
     """One Target per protocol × scenario asked for; raises ValueError on a contradiction."""
+    from softplc.latency.measurement import Target
+
     protocols = ["opcua", "modbus"] if args.protocol == "all" else [args.protocol]
     if args.endpoint:
         if args.protocol == "all":
@@ -169,6 +173,8 @@ def cmd_latency(args: argparse.Namespace) -> int:
 
 
 async def _run_all(plan: list[Target]) -> list[Measurement]:
+    from softplc.latency.measurement import measure
+
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -8,8 +8,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from softplc.latency.certificate import Security, make_client_certificate
-
 if TYPE_CHECKING:
     from softplc.latency.measurement import Target
 
@@ -19,6 +17,7 @@ log = logging.getLogger(__name__)
 def with_opcua_login(target: Target, state_dir: Path) -> Target:
     """Our OPC UA server lets anonymous clients only read: give the client an operator login
     (and, for --security Sign/SignAndEncrypt, a client certificate the server trusts)."""
+    from softplc.latency.certificate import Security, make_client_certificate
     from softplc.opcua import DEFAULT_NAMESPACE, Pki, Role, UserStore
 
     password = secrets.token_urlsafe(18)
@@ -40,6 +39,9 @@ def client_security(target: Target) -> Target:
     """For --endpoint: a secured mode without a certificate uses ~/.softplc/latency-client (made once)."""
     if not target.security:
         return target
+    # asyncua and cryptography come with certificate.py: imported only for a secured mode.
+    from softplc.latency.certificate import Security, make_client_certificate
+
     parsed = Security.parse(target.security)
     if not parsed.secured or parsed.certificate is not None:
         return target

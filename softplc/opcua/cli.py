@@ -6,15 +6,17 @@ import argparse
 import getpass
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from softplc.opcua.roles import ROLE_NAMES, Role
-from softplc.opcua.security import Pki, fingerprint, der_bytes, describe_file, load_certificate_file
-from softplc.opcua.settings import OpcUaSettings, SettingsError
-from softplc.opcua.users import MIN_PASSWORD_LENGTH, UserStore
 from softplc.yamlsource import load_yaml
 
+if TYPE_CHECKING:  # the rest of softplc.opcua needs asyncua: each command imports what it uses
+    from softplc.opcua.security import Pki
+    from softplc.opcua.settings import OpcUaSettings
+    from softplc.opcua.users import UserStore
+
 EXIT_OK, EXIT_FAILURE = 0, 1
+ROLE_NAMES = ("viewer", "operator", "engineer")  # = softplc.opcua.roles.ROLE_NAMES (a test keeps them equal)
 
 
 def add_commands(subparsers: Any) -> None:
@@ -80,6 +82,8 @@ def _settings(args: argparse.Namespace) -> tuple[OpcUaSettings, Path]:
     Only those sections are read (not the programs), so users and certificates can be managed
     even while the rest of the configuration does not load.
     """
+    from softplc.opcua.settings import OpcUaSettings, SettingsError
+
     config_path = Path(args.config)
     if not config_path.exists() and args.state_dir is not None:
         return OpcUaSettings(), args.state_dir
@@ -97,11 +101,15 @@ def _settings(args: argparse.Namespace) -> tuple[OpcUaSettings, Path]:
 
 
 def _pki(args: argparse.Namespace) -> Pki:
+    from softplc.opcua.security import Pki
+
     settings, state_dir = _settings(args)
     return Pki(settings.pki_path(state_dir))
 
 
 def _store(args: argparse.Namespace) -> UserStore:
+    from softplc.opcua.users import UserStore
+
     settings, state_dir = _settings(args)
     return UserStore(settings.users_path(state_dir))  # a broken file raises ConfigError: FILE:LINE:COL
 
@@ -111,6 +119,7 @@ def _store(args: argparse.Namespace) -> UserStore:
 
 def cmd_certs(args: argparse.Namespace) -> int:
     from softplc.cli import print_table
+    from softplc.opcua.security import describe_file
 
     pki = _pki(args)
     own = describe_file(pki.certificate_path) if pki.certificate_path.exists() else None
@@ -129,6 +138,8 @@ def cmd_certs(args: argparse.Namespace) -> int:
 
 
 def cmd_trust(args: argparse.Namespace) -> int:
+    from softplc.opcua.security import describe_file
+
     pki = _pki(args)
     try:
         path = pki.trust(args.certificate)
@@ -155,6 +166,9 @@ def cmd_untrust(args: argparse.Namespace) -> int:
 
 
 def cmd_users_add(args: argparse.Namespace) -> int:
+    from softplc.opcua.roles import Role
+    from softplc.opcua.security import der_bytes, fingerprint, load_certificate_file
+
     store = _store(args)
     certificate = None
     password = None
@@ -181,6 +195,8 @@ def cmd_users_add(args: argparse.Namespace) -> int:
 
 
 def _read_password(args: argparse.Namespace) -> str | None:
+    from softplc.opcua.users import MIN_PASSWORD_LENGTH
+
     if args.password_stdin:
         password = sys.stdin.readline().rstrip("\r\n")
     elif not sys.stdin.isatty():
