@@ -2,8 +2,8 @@
 
 pymodbus 3.16 on its own answers a quantity of 0 or above the limit with function 0x80 /
 exception 01 (its decoder rejects the frame), an unknown unit id with 04 plus a traceback in
-the log, and checks coil addresses only per 16-bit word. These subclasses (registered with
-the server's `custom_pdu`) follow the Modbus Application Protocol's order instead:
+the log, and checks coil addresses only per 16-bit word. These subclasses (the only data
+requests functions.RequestDecoder knows) follow the Modbus Application Protocol's order instead:
 
     unknown unit id      → 0x0B gateway target failed to respond (logged at debug, no traceback)
     quantity out of range → 03 illegal data value
@@ -58,13 +58,19 @@ class RequestGuard:
         self.unit_id = unit_id
         self._unknown_units: set[int] = set()
 
+    def check_unit(self, device_id: int) -> ExcCodes | None:
+        """0B for a unit id other than ours (the first check of every function code), else None."""
+        if device_id == self.unit_id:
+            return None
+        if device_id not in self._unknown_units:
+            self._unknown_units.add(device_id)  # say it once per unit id (at most 256), not per request
+            log.debug("modbus: request for unit id %d, this server is unit %d", device_id, self.unit_id)
+        return ExcCodes.GATEWAY_NO_RESPONSE
+
     def check(self, function_code: int, device_id: int, ranges: list[tuple[int, int]]) -> ExcCodes | None:
         """An exception code for a request touching (address, count) `ranges`, or None if it may proceed."""
-        if device_id != self.unit_id:
-            if device_id not in self._unknown_units:
-                self._unknown_units.add(device_id)  # say it once per unit id, not per request
-                log.debug("modbus: request for unit id %d, this server is unit %d", device_id, self.unit_id)
-            return ExcCodes.GATEWAY_NO_RESPONSE
+        if (code := self.check_unit(device_id)) is not None:
+            return code
         table, limit = LIMITS[function_code]
         for index, (_, count) in enumerate(ranges):
             # FC23's write part may carry at most 121 registers.
@@ -78,7 +84,7 @@ class RequestGuard:
 
 
 def guarded_requests(guard: RequestGuard) -> list[type[ModbusPDU]]:
-    """Request classes bound to `guard`, for ModbusTcpServer(custom_pdu=...)."""
+    """Request classes bound to `guard`, one per data function code (see LIMITS)."""
 
     def make(base: type[ModbusPDU], ranges: Callable[[Any], list[tuple[int, int]]], decode: Callable[[Any, bytes], None] | None = None) -> type[ModbusPDU]:
         async def datastore_update(self: Any, context: Any, device_id: int) -> ModbusPDU:

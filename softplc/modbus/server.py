@@ -3,12 +3,14 @@
 Reads return the tag database's current values (the register image is refreshed on every
 read). Writes are decoded per tag, validated with `db.validate` exactly like an OPC UA write,
 and only if every tag of the request is valid are they submitted with `db.submit` (applied at
-the next cycle boundary). Exception codes (see docs/modbus.md):
+the next cycle boundary). Only the ten data function codes and FC43/14 device identification
+are served (functions.py). Exception codes (see docs/modbus.md):
 
+    01 illegal function      a function code softplc does not serve
     02 illegal data address  unmapped address, read-only tag, a write covering part of a value
-    03 illegal data value    bad quantity, wrong type (e.g. 2 for a bool), outside min/max, bad string
+    03 illegal data value    bad quantity or truncated request, wrong type (e.g. 2 for a bool), outside min/max, bad string
     04 server device failure an internal error while serving the request (logged)
-    0B gateway no response   a unit id other than servers.modbus.unit_id
+    0B gateway no response   a unit id other than servers.modbus.unit_id (checked first, for every function)
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ from softplc.config import PlantConfig
 from softplc.modbus.address_map import AddressMap, Table, build_address_map
 from softplc.modbus.codec import CodecError
 from softplc.modbus import lognoise
+from softplc.modbus.functions import RequestDecoder
+from softplc.modbus.identification import device_objects, identification_request
 from softplc.modbus.image import RegisterImage
 from softplc.modbus.requests import LIMITS, RequestGuard, guarded_requests
 from softplc.modbus.settings import ModbusSettings
@@ -58,6 +62,7 @@ class ModbusAdapter:
         self.settings = settings or ModbusSettings.from_servers(config.servers)
         # Built now so a bad map is a configuration error before anything starts.
         self.map: AddressMap = build_address_map(config, self.settings)
+        self._plant_name = config.name
         self.port: int | None = None
         self._server: ModbusTcpServer | None = None
         self._image: RegisterImage | None = None
@@ -81,7 +86,10 @@ class ModbusAdapter:
         self._unsubscribe = db.on_change(self._image.note_changed)
         device = SimDevice(settings.unit_id, simdata=self._simdata(), action=self._action)
         guard = RequestGuard(self.map, settings.unit_id)
-        server = ModbusTcpServer(device, address=(settings.host, settings.port), custom_pdu=guarded_requests(guard))
+        served = [*guarded_requests(guard), identification_request(guard, device_objects(self._plant_name))]
+        server = ModbusTcpServer(device, address=(settings.host, settings.port))
+        # Every connection decodes with the server's decoder: only what softplc serves is known.
+        server.decoder = RequestDecoder(served, guard)
         try:
             await server.serve_forever(background=True)
         except (RuntimeError, OSError) as error:
