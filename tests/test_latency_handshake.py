@@ -212,3 +212,70 @@ def test_unknown_scenario_faults_the_program(tmp_path):
 def test_shipped_config_loads():
     config = load_config(HANDSHAKE_YAML)
     assert {d.name for d in config.tags} >= {"Ready", "TaskID", "Delay", "DelayScans", "Handshakes", "ReadyStamp"}
+
+
+async def scans(runtime: Runtime, count: int) -> None:
+    """Let `count` scans of the 10 ms task run (the simulated clock jumps)."""
+    await runtime.clock.sleep(0.01 * count + 0.001)
+
+
+async def test_taskid_while_a_task_runs_is_followed_and_counted_as_unexpected(tmp_path):
+    runtime = Runtime(handshake_config("fast"), SimClock(), state_dir=tmp_path)
+    await runtime.start()
+    try:
+        db = runtime.db
+        await scans(runtime, 2)
+        db.submit([("TaskID", 1), ("Ready", False)], "client")  # starts the sequence
+        await scans(runtime, 2)
+        assert db.value("RunningTask") == 1 and db.value("Ready") is False
+        # Task 1 (100 ms) is running: nobody asked for a TaskID.
+        db.submit([("TaskID", 3)], "someone else")
+        await scans(runtime, 2)
+        assert db.value("RunningTask") == 3 and db.value("Unexpected") == 1
+        assert db.value("Handshakes") == 0  # no handshake, nothing timed
+        # Task 3 runs its full 500 ms from the switch; the next Ready is answered as usual.
+        await scans(runtime, 48)
+        assert db.value("Ready") is False
+        await scans(runtime, 3)
+        assert db.value("Ready") is True and db.value("RunningTask") == 0
+        db.submit([("TaskID", 1), ("Ready", False)], "client")
+        await scans(runtime, 2)
+        assert db.value("Handshakes") == 1 and db.value("Unexpected") == 1 and db.value("BadAnswers") == 0
+    finally:
+        await runtime.stop()
+
+
+@pytest.mark.parametrize("answer", [1, 0], ids=["same TaskID", "TaskID 0"])
+async def test_ready_cleared_without_a_valid_taskid_is_asked_again(tmp_path, answer):
+    runtime = Runtime(handshake_config("fast"), SimClock(), state_dir=tmp_path)
+    await runtime.start()
+    try:
+        db = runtime.db
+        await scans(runtime, 2)
+        db.submit([("TaskID", 1), ("Ready", False)], "client")
+        await scans(runtime, 12)  # task 1 (100 ms) done: Ready again
+        assert db.value("Ready") is True
+        stamp = db.value("ReadyStamp")
+        db.submit([("TaskID", answer), ("Ready", False)], "client")
+        await scans(runtime, 1)
+        assert db.value("Ready") is False  # one scan's grace for a TaskID sent separately
+        await scans(runtime, 1)
+        assert db.value("Ready") is True and db.value("BadAnswers") == 1
+        assert db.value("ReadyStamp") == stamp  # the same request, still timed from its start
+        # It keeps asking until a valid new TaskID arrives.
+        db.submit([("Ready", False)], "client")
+        await scans(runtime, 3)
+        assert db.value("Ready") is True and db.value("BadAnswers") == 2
+        db.submit([("TaskID", 2), ("Ready", False)], "client")
+        await scans(runtime, 2)
+        assert db.value("Handshakes") == 1 and db.value("RunningTask") == 2 and db.value("Ready") is False
+        assert db.value("DelayScans") >= 7 and db.value("Unexpected") == 0
+    finally:
+        await runtime.stop()
+
+
+async def test_a_client_clearing_ready_one_scan_before_the_taskid_is_no_bad_answer(tmp_path):
+    runtime = Runtime(handshake_config("fast"), SimClock(), state_dir=tmp_path)
+    client = SimulatedClient(runtime, response=lambda n: 0.002, clear_ready="first")
+    await run_handshakes(runtime, client, 4)
+    assert runtime.db.value("BadAnswers") == 0 and runtime.db.value("Unexpected") == 0
