@@ -170,6 +170,8 @@ MODBUS_SERVER: dict[str, Any] = {
         "string_words": {"type": "integer", "minimum": 1, "maximum": 123, "description": "Registers per string tag (default 16)."},
         "system_tags": {"type": "boolean", "description": "Serve the _sys. tags (default true)."},
         "system_base": {"type": "integer", "minimum": 0, "maximum": 65535, "description": "First address of the _sys. tag block in each table (default 60000)."},
+        "max_connections": {"type": "integer", "minimum": 1, "maximum": 4096, "description": "Most simultaneous client connections; more are refused (default 64)."},
+        "idle_timeout": {**DURATION, "description": "Close a connection that sent nothing for this long; 0 = never (default 60s)."},
     },
     "additionalProperties": False,
 }

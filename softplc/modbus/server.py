@@ -4,7 +4,8 @@ Reads return the tag database's current values (the register image is refreshed 
 read). Writes are decoded per tag, validated with `db.validate` exactly like an OPC UA write,
 and only if every tag of the request is valid are they submitted with `db.submit` (applied at
 the next cycle boundary). Only the ten data function codes and FC43/14 device identification
-are served (functions.py). Exception codes (see docs/modbus.md):
+are served (functions.py); connections are capped and idle ones closed (connections.py).
+Exception codes (see docs/modbus.md):
 
     01 illegal function      a function code softplc does not serve
     02 illegal data address  unmapped address, read-only tag, a write covering part of a value
@@ -21,7 +22,6 @@ from collections.abc import Callable
 from typing import Any
 
 from pymodbus.constants import ExcCodes
-from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType as SimType
 from pymodbus.simulator import SimData, SimDevice
 
@@ -29,13 +29,15 @@ from softplc.config import PlantConfig
 from softplc.modbus.address_map import AddressMap, Table, build_address_map
 from softplc.modbus.codec import CodecError
 from softplc.modbus import lognoise
+from softplc.modbus.connections import ConnectionCounts, PlcTcpServer
 from softplc.modbus.functions import RequestDecoder
 from softplc.modbus.identification import device_objects, identification_request
 from softplc.modbus.image import RegisterImage
 from softplc.modbus.requests import LIMITS, RequestGuard, guarded_requests
-from softplc.modbus.settings import ModbusSettings
+from softplc.modbus.settings import ModbusSettings, settings_problems
 from softplc.runtime import AdapterError, Runtime
 from softplc.tagdb import Rule, TagDatabase, WriteRejected
+from softplc.yamlsource import ConfigError
 
 log = logging.getLogger(__name__)
 
@@ -59,12 +61,15 @@ class ModbusAdapter:
     name = "modbus"
 
     def __init__(self, config: PlantConfig, settings: ModbusSettings | None = None) -> None:
+        problems = settings_problems(config)
+        if problems:
+            raise ConfigError(problems)
         self.settings = settings or ModbusSettings.from_servers(config.servers)
         # Built now so a bad map is a configuration error before anything starts.
         self.map: AddressMap = build_address_map(config, self.settings)
         self._plant_name = config.name
         self.port: int | None = None
-        self._server: ModbusTcpServer | None = None
+        self._server: PlcTcpServer | None = None
         self._image: RegisterImage | None = None
         self._db: TagDatabase | None = None
         self._unsubscribe: Callable[[], None] | None = None
@@ -87,9 +92,13 @@ class ModbusAdapter:
         device = SimDevice(settings.unit_id, simdata=self._simdata(), action=self._action)
         guard = RequestGuard(self.map, settings.unit_id)
         served = [*guarded_requests(guard), identification_request(guard, device_objects(self._plant_name))]
-        server = ModbusTcpServer(device, address=(settings.host, settings.port))
-        # Every connection decodes with the server's decoder: only what softplc serves is known.
-        server.decoder = RequestDecoder(served, guard)
+        server = PlcTcpServer(
+            device,
+            address=(settings.host, settings.port),
+            decoder=RequestDecoder(served, guard),
+            max_connections=settings.max_connections,
+            idle_timeout=settings.idle_timeout,
+        )
         try:
             await server.serve_forever(background=True)
         except (RuntimeError, OSError) as error:
@@ -106,6 +115,12 @@ class ModbusAdapter:
         server, self._server = self._server, None
         if server is not None:
             await server.shutdown()
+
+    def connections(self) -> ConnectionCounts:
+        """Open client connections, and how many were refused or closed for idleness."""
+        if self._server is None:
+            return ConnectionCounts(0, 0, 0)
+        return self._server.counts
 
     def describe(self) -> str:
         counts = ", ".join(f"{sum(m.words for m in self.map.in_table(t))} {t.plural}" for t in Table)

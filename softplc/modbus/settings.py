@@ -4,13 +4,24 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from softplc.durations import parse_duration
+
+if TYPE_CHECKING:
+    from softplc.config import PlantConfig
+    from softplc.yamlsource import Problem
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 5020  # 502 needs root; integrators point their client at 5020 or override
 DEFAULT_UNIT_ID = 1
 DEFAULT_STRING_WORDS = 16
 DEFAULT_SYSTEM_BASE = 60000
+# PLCs serve 8 (S7-1200, Lexium) to 32-64 (Modicon M340/M580) Modbus TCP connections; a plant's
+# SCADA, HMI and historian need a handful. pymodbus itself has no limit.
+DEFAULT_MAX_CONNECTIONS = 64
+# A connection that sends nothing for this long is closed (0 = never); any request resets it.
+DEFAULT_IDLE_TIMEOUT = 60.0
 
 
 @dataclass(frozen=True)
@@ -25,6 +36,8 @@ class ModbusSettings:
     string_words: int = DEFAULT_STRING_WORDS
     system_tags: bool = True
     system_base: int = DEFAULT_SYSTEM_BASE
+    max_connections: int = DEFAULT_MAX_CONNECTIONS
+    idle_timeout: float = DEFAULT_IDLE_TIMEOUT
 
     @classmethod
     def from_servers(cls, servers: dict[str, Any]) -> ModbusSettings:
@@ -44,6 +57,9 @@ class ModbusSettings:
             string_words=int(section.get("string_words", DEFAULT_STRING_WORDS)),
             system_tags=bool(section.get("system_tags", True)),
             system_base=int(section.get("system_base", DEFAULT_SYSTEM_BASE)),
+            max_connections=int(section.get("max_connections", DEFAULT_MAX_CONNECTIONS)),
+            # A bad duration is reported with its location by settings_problems (ModbusAdapter).
+            idle_timeout=_seconds(section.get("idle_timeout", DEFAULT_IDLE_TIMEOUT)) or 0.0,
         )
 
     def override(self, *, host: str | None = None, port: int | None = None, disable: bool = False) -> ModbusSettings:
@@ -56,6 +72,28 @@ class ModbusSettings:
         if disable:
             settings = replace(settings, enabled=False)
         return settings
+
+
+def settings_problems(config: PlantConfig) -> list[Problem]:
+    """Located mistakes in `servers.modbus` that the schema cannot see (a duration's text)."""
+    section = config.servers.get("modbus")
+    if not isinstance(section, dict) or "idle_timeout" not in section:
+        return []
+    value = section["idle_timeout"]
+    if _seconds(value) is not None:
+        return []
+    from softplc.yamlsource import Location, Problem
+
+    message = f"bad idle_timeout {value!r}: write a duration such as 60s or 5min, or 0 to never close idle connections"
+    path = ("servers", "modbus", "idle_timeout")
+    return [config.source.problem(path, message) if config.source else Problem(Location(str(config.path), 1, 1), message)]
+
+
+def _seconds(value: Any) -> float | None:
+    try:
+        return parse_duration(value)
+    except (TypeError, ValueError):
+        return None
 
 
 def port_number(text: str) -> int:
