@@ -157,6 +157,24 @@ async def test_roles_decide_who_writes(plant) -> None:
         assert results[0].value == ua.StatusCodes.BadOutOfRange
 
 
+async def test_user_access_level_tells_each_role_what_it_may_write(plant) -> None:
+    _, server = plant
+    expected = {None: (1, 1), "viewer": (1, 1), "operator": (3, 1), "engineer": (3, 3)}  # (rw tag i32, ro tag ro_i32)
+    for user, (rw_level, ro_level) in expected.items():
+        async with client_for(server, user) as client:
+            ns = await _ns(client)
+            levels = []
+            for tag in ("i32", "ro_i32"):
+                node = client.get_node(ua.NodeId(tag, ns))
+                levels.append((await node.read_attribute(ua.AttributeIds.UserAccessLevel)).Value.Value)
+                assert (await node.read_attribute(ua.AttributeIds.UserWriteMask)).Value.Value == 0
+            assert tuple(levels) == (rw_level, ro_level), user
+            # The AccessLevel stays the tag's own; nobody may write a property.
+            assert (await client.get_node(ua.NodeId("ro_i32", ns)).read_attribute(ua.AttributeIds.AccessLevel)).Value.Value == 1
+            eu_range = await client.get_node(ua.NodeId("i16", ns)).get_child(["0:EURange"])
+            assert (await eu_range.read_attribute(ua.AttributeIds.UserAccessLevel)).Value.Value & 2 == 0, user
+
+
 async def test_wrong_password_and_the_old_admin_backdoor_are_refused(plant) -> None:
     _, server = plant
     for user, password in (("operator", "not-the-password"), ("admin", "anything"), ("Admin", ""), ("nobody", PASSWORDS["operator"])):

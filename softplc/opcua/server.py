@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 from urllib.parse import urlparse
 
 from asyncua import Server, ua
+from asyncua.common.callback import CallbackType
 
 from softplc import __version__
 from softplc.opcua.address_space import AddressSpaceBuilder, plan_folders, tag_node_id
@@ -209,6 +210,8 @@ class OpcUaServer:
         self.node_count = builder.node_count
         self.writes = TagAttributeService(iserver.aspace, db, ns)
         iserver.attribute_service = self.writes
+        # UserAccessLevel per session role: asyncua's attribute service reads without the session.
+        self.server.subscribe_server_callback(CallbackType.PostRead, self.writes.user_access_level)
 
     def _after_listen(self, server: Server) -> None:
         host, port, path = self.settings.parsed_endpoint()

@@ -16,6 +16,11 @@ session's Write goes through) by `TagAttributeService`, which answers each item 
     BadWriteNotSupported      a StatusCode other than Good (clients cannot set quality)
     BadIndexRangeInvalid      an IndexRange (tags are scalars)
 
+UserAccessLevel, as read by a client session, tells what *its* role may do (a PostRead hook,
+`TagAttributeService.user_access_level`): CurrentRead|CurrentWrite (3) on the tags the role may
+write — `rw` tags for an operator, every tag for an engineer — and CurrentRead (1) elsewhere
+(every tag for a viewer or an anonymous session; folders, properties and asyncua's nodes for all).
+
 Nothing of an invalid item is applied; valid items of the same Write are journaled together,
 so a scan sees all of them or none. The address space is never written here: it follows the
 tag database (see `publisher.py`), so a read right after a Write returns the old value until
@@ -34,6 +39,7 @@ import logging
 from typing import Any
 
 from asyncua import ua
+from asyncua.common.callback import CallbackService, ServerItemCallback
 from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AddressSpace, AttributeService
@@ -49,6 +55,7 @@ log = logging.getLogger(__name__)
 MAX_NODES_PER_READ = 20_000
 MAX_NODES_PER_WRITE = 5_000
 _YIELD_EVERY = 500
+_CURRENT_WRITE = ua.AccessLevel.CurrentWrite.mask
 
 _RULE_CODES = {
     Rule.UNKNOWN_TAG: ua.StatusCodes.BadNodeIdUnknown,
@@ -72,6 +79,23 @@ class TagAttributeService(AttributeService):
         if len(params.NodesToRead) > MAX_NODES_PER_READ:
             raise ServiceError(ua.StatusCodes.BadTooManyOperations)
         return super().read(params)
+
+    def user_access_level(self, event: ServerItemCallback, _: CallbackService) -> None:
+        """PostRead hook: replace each UserAccessLevel read by what the session's role may do."""
+        role = role_of(event.user)
+        if role is None:
+            return  # the server's own code: the stored value
+        results: list[ua.DataValue] = event.response_params
+        for index, item in enumerate(event.request_params.NodesToRead):
+            if item.AttributeId != ua.AttributeIds.UserAccessLevel:
+                continue
+            stored = results[index].Value
+            if stored is None or not isinstance(stored.Value, int):
+                continue  # no such node or attribute: keep the error status
+            node_id = item.NodeId
+            tag = self.db.get(node_id.Identifier) if node_id.NamespaceIndex == self.ns and isinstance(node_id.Identifier, str) else None
+            writable = tag is not None and role.may_write and (tag.definition.writable_by_clients or role.may_write_read_only)
+            results[index] = _access_level(stored.Value | _CURRENT_WRITE if writable else stored.Value & ~_CURRENT_WRITE)
 
     async def write(self, params: ua.WriteParameters, user: User = User(role=UserRole.Admin)) -> list[ua.StatusCode]:
         items = params.NodesToWrite
@@ -146,3 +170,14 @@ class TagAttributeService(AttributeService):
         except WriteRejected as rejected:
             raise WriteStatus(_RULE_CODES[rejected.rule], rejected.detail) from None
         return name, value, force
+
+
+_ACCESS_LEVELS: dict[int, ua.DataValue] = {}
+
+
+def _access_level(level: int) -> ua.DataValue:
+    """A shared DataValue for a UserAccessLevel (never mutated)."""
+    value = _ACCESS_LEVELS.get(level)
+    if value is None:
+        value = _ACCESS_LEVELS[level] = ua.DataValue(ua.Variant(level, ua.VariantType.Byte))
+    return value
