@@ -24,6 +24,7 @@ import time
 from typing import Any, Callable, TextIO
 
 from softplc.latency.driver import ROLES, Driver, DriverError, ReadyTracker, Snapshot
+from softplc.latency.endpoint import EndpointError, parse_endpoint
 
 Emit = Callable[[dict[str, Any]], None]
 MAX_CONSECUTIVE_TIMEOUTS = 3
@@ -67,7 +68,8 @@ class HandshakeClient:
                 consecutive += 1
                 self.emit({"type": "timeout", "index": index, "waited": self.timeout, "message": str(error), "t": time.monotonic()})
                 if consecutive >= MAX_CONSECUTIVE_TIMEOUTS:
-                    raise DriverError(f"{consecutive} timeouts in a row: the PLC sets no Ready (is it running the handshake?)") from None
+                    raise DriverError(f"no new Ready within {self.timeout:g} s, {consecutive} times in a row: "
+                                      "is the PLC running the handshake?") from None
                 continue
             consecutive = 0
             # The timed part: from seeing Ready to the write's acknowledgement, nothing else.
@@ -75,6 +77,8 @@ class HandshakeClient:
             await driver.answer(next_task)
             t_done = time.monotonic()
             self.tracker.answered(ready)
+            # Outside the timed part: tells `softplc latency` the client is alive (its watchdog).
+            self.emit({"type": "answered", "index": index, "task_id": next_task, "t": t_done})
             # The first answer to a PLC that has no task yet starts the sequence: nothing is counted.
             starting = index == 0 and first.task_id not in (1, 2, 3)
             after = await driver.settle(ready, None if starting else before, self.timeout)
@@ -137,11 +141,12 @@ def build_driver(args: argparse.Namespace) -> Driver:
 
     if args.mode == "subscription":
         raise DriverError("Modbus has no subscriptions: use --mode poll")
-    host, _, port = args.endpoint.removeprefix("modbus://").removeprefix("tcp://").rstrip("/").rpartition(":")
-    if not host or not port.isdigit():
-        raise DriverError(f"bad Modbus endpoint {args.endpoint!r}; write HOST:PORT, e.g. 127.0.0.1:5020")
+    try:
+        endpoint = parse_endpoint(args.endpoint, "modbus")
+    except EndpointError as error:
+        raise DriverError(str(error)) from None
     addresses = {**DEFAULT_ADDRESSES, **overrides}
-    return ModbusDriver(host, int(port), addresses, unit_id=args.unit_id, word_order=args.word_order, poll_interval=args.poll_interval / 1000.0)
+    return ModbusDriver(endpoint.host, endpoint.port, addresses, unit_id=args.unit_id, word_order=args.word_order, poll_interval=args.poll_interval / 1000.0)
 
 
 def parse_tags(items: list[str]) -> dict[str, str]:
@@ -167,7 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--poll-interval", type=float, default=1.0, metavar="MS", help="polling period in ms (default 1)")
     parser.add_argument("--publishing-interval", type=float, default=0.0, metavar="MS", help="OPC UA publishing interval in ms (default 0: at once)")
     parser.add_argument("--tag", action="append", metavar="ROLE=ADDRESS", help="node id or Modbus address of a role (repeatable)")
-    parser.add_argument("--namespace", help="OPC UA namespace URI for {ns} in node ids (default: the server's last)")
+    parser.add_argument("--namespace", help="OPC UA namespace URI for {ns} in node ids (default: urn:softplc:tags if the server has it, else its last)")
     parser.add_argument("--security", help="asyncua security string, e.g. Basic256Sha256,SignAndEncrypt,cert.pem,key.pem")
     parser.add_argument("--user")
     parser.add_argument("--password", default=os.environ.get("SOFTPLC_LATENCY_PASSWORD"))

@@ -169,7 +169,12 @@ class OpcuaDriver(PollingDriver):
             raise DriverError(f"write failed: {error!r}") from None
         bad = [f"{role}: {result.name}" for role, result in zip(("TaskID", "Ready"), results) if not result.is_good()]
         if bad:
-            raise DriverError("write refused: " + ", ".join(bad))
+            hint = ""
+            if any(result.name == "BadUserAccessDenied" for result in results):
+                hint = (" — this session may not write. Log in as a user who may: --user NAME with the password in "
+                        "$SOFTPLC_LATENCY_PASSWORD (on a softplc, anonymous sessions only read; add an operator with "
+                        "`softplc users add NAME --role operator --config CONFIG`, see docs/latency.md)")
+            raise DriverError("write refused: " + ", ".join(bad) + hint)
 
     async def wait_ready(self, tracker: ReadyTracker, timeout: float) -> Snapshot:
         if not self.subscription:
