@@ -15,6 +15,7 @@ import pytest
 from softplc.clock import RealClock
 from softplc.latency.measurement import Measurement, Target, measure
 from softplc.latency.plant import handshake_config
+from softplc.latency.progress import summary
 from softplc.latency.report import to_json
 from softplc.runtime import Runtime
 
@@ -106,6 +107,58 @@ async def test_killed_client_counts_the_missed_handshake():
     assert result.unreported in (0, 1)
     data = to_json(result)
     assert data["complete"] is False and data["missed"] == 1 and data["samples"] == 5
+    # With its context: when that Ready was set, what was never attempted, why the run ended.
+    assert result.ended == "client died" and result.not_attempted == 200 - 5 - 1
+    (note,) = result.missed_notes
+    assert "after the client ended" in note or "before the client ended" in note
+    assert summary(result).startswith("samples 5 of 200 requested")
+
+
+async def test_the_wait_after_the_client_died_is_announced_and_ends_at_ctrl_c():
+    """Slow scenario: the warm-up answer starts task 1 (10 s); the client dies at once. The wait for
+    the PLC's next Ready is announced, and stopping ends it: nothing is counted as missed."""
+    stop = asyncio.Event()
+    killed: list[int] = []
+    announced: list[str] = []
+
+    def progress(run: Measurement) -> None:
+        if run.warmup and not killed and run.client_pid:
+            os.kill(run.client_pid, signal.SIGKILL)
+            killed.append(run.client_pid)
+        if run.activity and not announced:
+            announced.append(run.activity)
+            stop.set()  # what Ctrl-C does
+
+    result = await asyncio.wait_for(measure(Target("modbus", "slow", scan=0.01, samples=3), progress, stop), 60)
+    assert killed and announced and "waiting up to 31 s for its next Ready" in announced[0]
+    assert result.missed == 0 and not result.missed_notes  # the 10 s task was not waited out
+    assert "interrupted by the user while waiting for the PLC's next Ready (not counted)" in result.errors
+    assert result.ended == "client died" and result.not_attempted == 3
+
+
+async def test_a_hung_client_ends_the_run_and_keeps_its_samples(monkeypatch):
+    from softplc.latency import client_process
+
+    monkeypatch.setattr(client_process, "WATCHDOG_MARGIN", 1.0)
+    stopped: list[int] = []
+
+    def freeze_after_three(run: Measurement) -> None:
+        if len(run.samples) >= 3 and not stopped and run.client_pid:
+            os.kill(run.client_pid, signal.SIGSTOP)
+            stopped.append(run.client_pid)
+
+    try:
+        result = await asyncio.wait_for(measure(Target("modbus", "fast", scan=0.01, samples=200), freeze_after_three), 60)
+    finally:
+        for pid in stopped:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+    assert stopped
+    assert len(result.samples) == 3 and result.ended == "client hung"
+    assert any("reported nothing for" in error and "it hangs and was killed" in error for error in result.errors)
+    assert result.client_exit == -signal.SIGKILL and to_json(result)["samples"] == 3
 
 
 async def _serve_handshake(tmp_path: Path, protocol: str) -> tuple[Runtime, str]:
@@ -150,6 +203,40 @@ async def test_endpoint_opcua_against_a_second_runtime(tmp_path):
         await runtime.stop()
 
 
+async def test_endpoint_opcua_anonymous_is_refused_with_a_hint(tmp_path):
+    """`softplc run programs/handshake.yaml` lets anonymous sessions only read: the error says how to log in."""
+    runtime, endpoint = await _serve_handshake(tmp_path, "opcua")
+    try:
+        code, stdout, stderr = await run_cli("latency", "--endpoint", endpoint, "--samples", "3")
+    finally:
+        await runtime.stop()
+    assert code == 1
+    assert "BadUserAccessDenied" in stderr and "--user NAME" in stderr and "$SOFTPLC_LATENCY_PASSWORD" in stderr
+    assert "softplc users add NAME --role operator" in stderr
+    assert stderr.count("write refused") == 1  # the run's line; the report (stdout) has its own
+    assert "after the client died" not in stderr + stdout
+
+
+def test_the_documented_operator_login_lands_where_the_run_looks(tmp_path):
+    """`softplc users add NAME --role operator --config programs/handshake.yaml` (as the docs say)
+    writes the users file of the state directory `softplc run programs/handshake.yaml` uses."""
+    import shutil
+    import subprocess
+
+    from softplc.config import load_config
+    from softplc.opcua import UserStore
+
+    for name in ("handshake.yaml", "handshake.py"):
+        shutil.copy(REPO / "programs" / name, tmp_path / name)
+    config = tmp_path / "handshake.yaml"
+    docs = (REPO / "docs" / "latency.md").read_text() + (REPO / "programs" / "handshake.yaml").read_text()
+    assert "softplc users add latency --role operator --config programs/handshake.yaml" in docs
+    subprocess.run([sys.executable, "-m", "softplc.cli", "users", "add", "latency", "--role", "operator", "--config", str(config),
+                    "--password-stdin"], input="handshake-password\n", text=True, check=True, capture_output=True, timeout=60)
+    store = UserStore(load_config(config).state_dir / "users.yaml")
+    assert "latency" in store
+
+
 async def test_endpoint_modbus_third_party_layout(tmp_path):
     """A PLC exposing only Ready, TaskID and Delay (no counter, no stamp): PLC delays, no hi-res."""
     runtime, endpoint = await _serve_handshake(tmp_path, "modbus")
@@ -172,5 +259,37 @@ async def test_bad_options_are_clear():
     assert code == 1 and "does not look like opcua" in stderr
     code, _, stderr = await run_cli("latency", "--endpoint", "127.0.0.1:1", "--samples", "3", "--tag", "ready=nowhere:1")
     assert code == 1 and "bad Modbus address 'nowhere:1'" in stderr
-    code, _, stderr = await run_cli("latency", "--endpoint", "127.0.0.1:1", "--samples", "3")
+    code, stdout, stderr = await run_cli("latency", "--endpoint", "127.0.0.1:1", "--samples", "3")
     assert code == 1 and "cannot connect to Modbus TCP 127.0.0.1:1" in stderr
+    # Said once; no table of nothing, no second read "after the client died" (it never connected).
+    assert stderr.count("cannot connect") == 1 and "after the client died" not in stderr and stdout == ""
+
+
+@pytest.mark.parametrize("endpoint", ["garbage", "http://x:1", "opc.tcp://"])
+async def test_a_malformed_endpoint_starts_nothing(endpoint):
+    code, stdout, stderr = await run_cli("latency", "--endpoint", endpoint, "--samples", "3")
+    assert code == 1 and stdout == ""
+    (line,) = stderr.strip().splitlines()  # one clear message, before any run
+    assert line.startswith(f"softplc latency: --endpoint '{endpoint}'")
+
+
+async def test_bad_numbers_exit_before_the_header():
+    for option, value in (("--timeout", "-1"), ("--poll-interval", "-5"), ("--scan", "0.01")):
+        code, stdout, stderr = await run_cli("latency", option, value)
+        assert code == 2 and f"argument {option}:" in stderr and "run" not in stderr.splitlines()[-1].split(":")[0]
+        assert "softplc latency: 1 run" not in stderr and stdout == ""
+
+
+async def test_ctrl_c_at_start_ends_quietly():
+    process = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "softplc.cli", "latency", "--protocol", "modbus", "--samples", "50", cwd=REPO,
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )
+    assert process.stderr is not None
+    header = await asyncio.wait_for(process.stderr.readline(), 60)
+    assert header.startswith(b"softplc latency: 1 run")
+    process.send_signal(signal.SIGINT)
+    stdout, rest = await asyncio.wait_for(process.communicate(), 60)
+    assert process.returncode == 1
+    assert b"Traceback" not in rest and b"interrupted by the user" in rest
+

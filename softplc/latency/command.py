@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import math
 import signal
 import sys
-import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
@@ -17,6 +17,24 @@ if TYPE_CHECKING:
     from softplc.latency.measurement import Measurement, Target
 
 EXIT_OK, EXIT_FAILURE = 0, 1
+MIN_SCAN_MS = 0.1  # the runtime's shortest task interval
+
+
+def number(kind: type, *, low: float, inclusive: bool = True, high: float | None = None, unit: str = "") -> Any:
+    """An argparse type: a finite `kind` ≥ low (> low unless `inclusive`) and ≤ high, or a clear message."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {'a whole number' if kind is int else 'a number'}") from None
+        too_low = value < low if inclusive else value <= low
+        if not math.isfinite(value) or too_low or (high is not None and value > high):
+            limits = f"from {low:g} to {high:g}" if high is not None else f"at least {low:g}" if inclusive else f"more than {low:g}"
+            raise argparse.ArgumentTypeError(f"{text} is out of range: must be {limits}{unit}")
+        return value
+
+    return parse
 
 
 def add_commands(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -35,28 +53,36 @@ def add_commands(commands: argparse._SubParsersAction) -> None:  # type: ignore[
     parser.add_argument("--scenario", choices=(*SCENARIO_NAMES, "all"), default="fast",
                         help="task durations: slow 10/20/30 s, average 1/2/5 s, fast 100/200/500 ms (default fast)")
     amount = parser.add_mutually_exclusive_group()
-    amount.add_argument("--samples", type=int, metavar="N", help="handshakes to measure per run (default 100)")
-    amount.add_argument("--duration", type=float, metavar="S", help="measure for S seconds per run instead")
-    parser.add_argument("--scan", type=float, default=10.0, metavar="MS",
-                        help="the PLC's scan in ms (default 10, the thesis's); with --endpoint: what the remote PLC runs")
+    amount.add_argument("--samples", type=number(int, low=1), metavar="N", help="handshakes to measure per run (default 100)")
+    amount.add_argument("--duration", type=number(float, low=0, inclusive=False, unit=" s"), metavar="S",
+                        help="measure for S seconds per run instead")
+    parser.add_argument("--scan", type=number(float, low=MIN_SCAN_MS, unit=" ms (the runtime's shortest task interval is 100us)"),
+                        default=10.0, metavar="MS",
+                        help="the PLC's scan in ms (default 10, the thesis's; at least 0.1); with --endpoint: what the remote PLC runs")
     parser.add_argument("--client", choices=("subscription", "poll"), help="OPC UA client mode (default subscription; Modbus always polls)")
-    parser.add_argument("--poll-interval", type=float, default=1.0, metavar="MS", help="client polling period (default 1 ms)")
-    parser.add_argument("--publishing-interval", type=float, default=0.0, metavar="MS",
+    parser.add_argument("--poll-interval", type=number(float, low=0, inclusive=False, unit=" ms"), default=1.0, metavar="MS",
+                        help="client polling period (default 1 ms)")
+    parser.add_argument("--publishing-interval", type=number(float, low=0, unit=" ms"), default=0.0, metavar="MS",
                         help="OPC UA subscription publishing interval (default 0: publish at once)")
-    parser.add_argument("--endpoint", metavar="URL", help="measure this server instead of starting ours: opc.tcp://HOST:PORT/PATH or HOST:PORT (Modbus)")
+    parser.add_argument("--endpoint", metavar="URL",
+                        help="measure this server instead of starting ours: opc.tcp://HOST:PORT[/PATH] (OPC UA) or HOST:PORT "
+                        "(Modbus; also modbus://HOST:PORT)")
     parser.add_argument("--tag", action="append", default=[], metavar="ROLE=ADDRESS",
                         help="with --endpoint: where a role lives, e.g. ready=ns=4;s=MAIN.ROI_Ready or task_id=holding:1 "
                         "(roles: ready, task_id, delay, delay_scans, handshakes, ready_stamp; ROLE= drops one)")
-    parser.add_argument("--namespace", metavar="URI", help="OPC UA namespace URI for {ns} in node ids (default: the server's last)")
+    parser.add_argument("--namespace", metavar="URI", help="OPC UA namespace URI for {ns} in node ids "
+                        "(default: urn:softplc:tags if the server has it, else the server's last)")
     parser.add_argument("--security", metavar="MODE[,CERT,KEY]",
                         help="OPC UA security: None, Sign or SignAndEncrypt (Basic256Sha256), optionally with the client "
                         "certificate and key files; without them one is made (our runtime trusts it itself; another server "
                         "must trust ~/.softplc/latency-client/latency-client.der)")
-    parser.add_argument("--user", help="OPC UA user name (password from $SOFTPLC_LATENCY_PASSWORD)")
-    parser.add_argument("--unit-id", type=int, default=1, help="Modbus unit id (default 1)")
+    parser.add_argument("--user", help="OPC UA user name (password from $SOFTPLC_LATENCY_PASSWORD); a softplc lets anonymous "
+                        "sessions only read: add an operator with `softplc users add NAME --role operator --config CONFIG`")
+    parser.add_argument("--unit-id", type=number(int, low=0, high=255), default=1, help="Modbus unit id (default 1)")
     parser.add_argument("--word-order", choices=("big", "little"), default="big", help="Modbus word order of 32/64-bit values")
-    parser.add_argument("--timeout", type=float, metavar="S", help="wait this long for a Ready before counting a timeout "
-                        "(default: the scenario's longest task + 1 s)")
+    parser.add_argument("--timeout", type=number(float, low=0, inclusive=False, unit=" s"), metavar="S",
+                        help="wait this long for a Ready before counting a timeout "
+                        "(default: the scenario's longest task + 1 s; must be longer than that task)")
     parser.add_argument("--loop", choices=("asyncio", "uvloop"), default="asyncio", help="event loop of our runtime (default asyncio)")
     parser.add_argument("--out", type=Path, metavar="DIR", help="write samples.csv, statistics.json, report.txt and PNG figures here")
     parser.add_argument("--json", action="store_true", help="print the statistics as JSON on stdout (the table goes to stderr)")
@@ -65,15 +91,17 @@ def add_commands(commands: argparse._SubParsersAction) -> None:  # type: ignore[
 
 def targets(args: argparse.Namespace) -> list[Target]:
     """One Target per protocol × scenario asked for; raises ValueError on a contradiction."""
+    from softplc.latency.endpoint import guess_protocol, parse_endpoint
     from softplc.latency.measurement import Target
 
     protocols = ["opcua", "modbus"] if args.protocol == "all" else [args.protocol]
-    if args.endpoint:
+    if args.endpoint is not None:
         if args.protocol == "all":
-            guessed = "opcua" if args.endpoint.startswith("opc.tcp://") else "modbus"
-            protocols = [guessed]
-        elif (args.protocol == "opcua") != args.endpoint.startswith("opc.tcp://"):
-            raise ValueError(f"--endpoint {args.endpoint} does not look like {args.protocol}: write opc.tcp://HOST:PORT/PATH for OPC UA, HOST:PORT for Modbus")
+            protocols = [guess_protocol(args.endpoint)]
+        elif args.protocol != guess_protocol(args.endpoint):
+            raise ValueError(f"--endpoint {args.endpoint} does not look like {args.protocol}: write opc.tcp://HOST:PORT[/PATH] "
+                             "for OPC UA, HOST:PORT for Modbus")
+        parse_endpoint(args.endpoint, protocols[0])  # EndpointError (a ValueError) says what is wrong
     elif args.tag:
         raise ValueError("--tag is for --endpoint: our own handshake plant has its tags where the client expects them")
     _check_tags(args.tag, protocols)
@@ -85,13 +113,13 @@ def targets(args: argparse.Namespace) -> list[Target]:
         if "opcua" not in protocols:
             raise ValueError("--security is for OPC UA")
         Security.parse(args.security)  # raises ValueError with the reason
-    if args.scan <= 0:
-        raise ValueError("--scan must be positive")
-    if args.samples is not None and args.samples < 1:
-        raise ValueError("--samples must be at least 1")
-    if args.duration is not None and args.duration <= 0:
-        raise ValueError("--duration must be positive")
     scenarios = list(SCENARIO_NAMES) if args.scenario == "all" else [args.scenario]
+    if args.timeout is not None:
+        for scenario in scenarios:
+            longest = max(scenario_durations(scenario))
+            if args.timeout <= longest:
+                raise ValueError(f"--timeout {args.timeout:g} s is not longer than the {scenario} scenario's longest task "
+                                 f"({longest:g} s): a Ready comes only after it (default: {longest + 1:g} s)")
     samples = args.samples if args.samples is not None or args.duration is not None else 100
     result = []
     for scenario in scenarios:
@@ -132,15 +160,27 @@ def _password(args: argparse.Namespace) -> str | None:
     return os.environ.get("SOFTPLC_LATENCY_PASSWORD") if args.user else None
 
 
-def estimate_seconds(target: Target) -> float:
-    """Roughly how long a run takes: three tasks per cycle of the scenario."""
-    if target.duration is not None:
-        return target.duration
-    durations = scenario_durations(target.scenario)
-    return (target.samples or 0) * sum(durations) / 3 + 3.0
-
-
 def cmd_latency(args: argparse.Namespace) -> int:
+    try:
+        return _latency(args)
+    except KeyboardInterrupt:  # e.g. while the options are checked, or a second Ctrl-C
+        print("\nsoftplc latency: interrupted by the user", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+class EarlyInterrupt:
+    """Notes a Ctrl-C that comes before the runs' event loop handles it (while that loop starts)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        self.requested = True
+
+
+def _latency(args: argparse.Namespace) -> int:
+    from softplc.latency.progress import estimate_seconds, plural
+
     try:
         plan = targets(args)
         total = sum(estimate_seconds(target) for target in plan)
@@ -161,33 +201,54 @@ def cmd_latency(args: argparse.Namespace) -> int:
             print("softplc latency: --loop uvloop needs the uvloop package: pip install uvloop", file=sys.stderr)
             return EXIT_FAILURE
         loop_factory = uvloop.new_event_loop
-    print(f"softplc latency: {len(plan)} run{'s' if len(plan) != 1 else ''}, about {_minutes(total)} "
-          f"({'--endpoint ' + args.endpoint if args.endpoint else 'our runtime in real time, the client in its own process'})",
-          file=sys.stderr)
-    with asyncio.Runner(loop_factory=loop_factory) as runner:
-        measurements = runner.run(_run_all(plan))
+    early = EarlyInterrupt()
+    previous = signal.signal(signal.SIGINT, early)
+    try:
+        print(f"softplc latency: {plural(len(plan), 'run')}, about {_minutes(total)} "
+              f"({'--endpoint ' + args.endpoint if args.endpoint else 'our runtime in real time, the client in its own process'})",
+              file=sys.stderr)
+        with asyncio.Runner(loop_factory=loop_factory) as runner:
+            measurements = runner.run(_run_all(plan, early))
+    finally:
+        signal.signal(signal.SIGINT, previous)
     report_stream = sys.stderr if args.json else sys.stdout
     _report(measurements, args, report_stream)
     problems = [m for m in measurements if not m.complete]
     return EXIT_OK if not problems and measurements else EXIT_FAILURE
 
 
-async def _run_all(plan: list[Target]) -> list[Measurement]:
+async def _run_all(plan: list[Target], early: EarlyInterrupt | None = None) -> list[Measurement]:
     from softplc.latency.measurement import measure
+    from softplc.latency.progress import ProgressBar, plural
 
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
+
+    def interrupt() -> None:
+        # The first Ctrl-C ends the run and reports it; a second one quits at once.
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+
     for sig in (signal.SIGINT, signal.SIGTERM):
         try:
-            loop.add_signal_handler(sig, stop.set)
+            loop.add_signal_handler(sig, interrupt)
         except (NotImplementedError, RuntimeError):
             pass
+    if early is not None and early.requested:
+        stop.set()
     measurements: list[Measurement] = []
-    for target in plan:
+    for index, target in enumerate(plan):
         if stop.is_set():
+            print(f"softplc latency: interrupted by the user; {plural(len(plan) - index, 'run')} not started", file=sys.stderr)
             break
         bar = ProgressBar(target, sys.stderr)
-        result = await measure(target, bar.update, stop)
+        redraw = asyncio.create_task(bar.redraw())
+        try:
+            result = await measure(target, bar.update, stop)
+        finally:
+            redraw.cancel()
+            await asyncio.gather(redraw, return_exceptions=True)
         bar.finish(result)
         measurements.append(result)
     return measurements
@@ -197,7 +258,9 @@ def _report(measurements: list[Measurement], args: argparse.Namespace, stream: T
     from softplc.latency.report import print_report, to_json, write_csv
 
     statistics = {"runs": [to_json(m) for m in measurements]}
-    print_report(measurements, stream)
+    # A run that never reached the PLC has nothing to tabulate: its line above said why.
+    if any(m.connected for m in measurements):
+        print_report(measurements, stream)
     if args.json:
         print(json.dumps(statistics, indent=2, default=_jsonable))
     if args.out is not None:
@@ -225,57 +288,3 @@ def _minutes(seconds: float) -> str:
     if seconds < 90:
         return f"{seconds:.0f} s"
     return f"{seconds / 60:.0f} min"
-
-
-class ProgressBar:
-    """A one-line progress bar with ETA on stderr (only on a terminal; otherwise start and end lines)."""
-
-    def __init__(self, target: Target, stream: TextIO) -> None:
-        self.target = target
-        self.stream = stream
-        self.live = stream.isatty()
-        self.last_draw = 0.0
-        self.announced = False
-
-    def update(self, run: Measurement) -> None:
-        if not self.announced:
-            self.announced = True
-            print(f"{self.target.label}: client process {run.client_pid} measuring {run.endpoint}", file=self.stream, flush=True)
-        now = time.monotonic()
-        if not self.live or now - self.last_draw < 0.2:
-            return
-        self.last_draw = now
-        target = self.target
-        done = len(run.samples)
-        if target.duration is not None:
-            fraction = min(1.0, run.wall_seconds / target.duration)
-            count = f"{done} samples"
-        else:
-            fraction = min(1.0, done / (target.samples or 1))
-            count = f"{done}/{target.samples} samples"
-        eta = run.wall_seconds * (1 - fraction) / fraction if fraction > 0 else estimate_seconds(target)
-        width = 28
-        filled = int(width * fraction)
-        last = run.samples[-1] if run.samples else None
-        figures = ""
-        if last is not None and last.plc_delay_ms is not None:
-            figures = f"  last: PLC {last.plc_delay_ms:.0f} ms"
-            hires = last.hires_ms(run.same_clock)
-            if hires is not None:
-                figures += f", hi-res {hires:.2f} ms"
-        trouble = f"  missed {run.missed} timeouts {run.timeouts}" if run.missed or run.timeouts else ""
-        line = f"\r{target.label:14s} [{'#' * filled}{'.' * (width - filled)}] {count}  ETA {_clock(eta)}{figures}{trouble}"
-        print(line + "\033[K", end="", file=self.stream, flush=True)
-
-    def finish(self, run: Measurement) -> None:
-        if self.live and self.announced:
-            print(file=self.stream)
-        state = "done" if run.complete else "INCOMPLETE: " + "; ".join(run.errors)
-        print(f"{self.target.label}: {len(run.ok_samples)} samples in {run.wall_seconds:.0f} s — {state}", file=self.stream, flush=True)
-
-
-def _clock(seconds: float) -> str:
-    seconds = max(0, int(seconds))
-    if seconds >= 3600:
-        return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m"
-    return f"{seconds // 60}m{seconds % 60:02d}s"

@@ -4,16 +4,15 @@ By default the handshake plant runs here, in real time, with only the protocol u
 served on a free loopback port; the client is a separate Python process (`softplc.latency.
 client`) that speaks the protocol like any external program. Its JSON lines become `Sample`s.
 
-Nothing is dropped silently. When the client dies before finishing, the PLC is read once
-more over the protocol: a Ready left unanswered is a *missed* handshake, and switches the PLC
-counted that the client never reported are *unreported*.
+Nothing is dropped silently. When the client dies (or hangs, and is killed) before finishing,
+the PLC is read once more over the protocol: a Ready left unanswered is a *missed* handshake,
+noted with when it was set, and switches the PLC counted that the client never reported are
+*unreported*. What was requested but never attempted is reported as such.
 """
 
 from __future__ import annotations
 
 import asyncio
-import collections
-import json
 import logging
 import os
 import sys
@@ -23,15 +22,16 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-from urllib.parse import urlparse
 
 from softplc.latency.credentials import client_security, with_opcua_login
+from softplc.latency.endpoint import EndpointError, parse_endpoint
 from softplc.latency.plant import handshake_config, scenario_durations
 
 log = logging.getLogger(__name__)
 
-LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
+LOOPBACK = {"127.0.0.1", "localhost", "::1"}
 Progress = Callable[["Measurement"], None]
+
 
 
 @dataclass
@@ -131,6 +131,12 @@ class Measurement:
     plc_task: dict[str, Any] = field(default_factory=dict)  # scan statistics of our runtime
     conditions: dict[str, Any] = field(default_factory=dict)
 
+    connected: bool = False  # the client connected and said hello
+    ended: str = ""  # why the run ended: complete, interrupted by the user, client died (…), …
+    activity: str = ""  # what the run is waiting for now, when that is not the client's next report
+    missed_notes: list[str] = field(default_factory=list)  # context of missed handshakes found after the client
+    client_gone_at: float | None = None  # monotonic time the client's output ended
+
     @property
     def ok_samples(self) -> list[Sample]:
         return [sample for sample in self.samples if sample.status == "ok"]
@@ -139,10 +145,20 @@ class Measurement:
     def complete(self) -> bool:
         return self.client_exit == 0 and not self.errors
 
+    @property
+    def not_attempted(self) -> int | None:
+        """Requested samples never attempted (the run ended first); None for a --duration run."""
+        if self.target.samples is None or self.target.duration is not None:
+            return None
+        attempted = len(self.samples) + len(self.missed_notes)
+        return max(0, self.target.samples - attempted)
+
 
 def is_loopback(endpoint: str) -> bool:
-    host = urlparse(endpoint).hostname if "://" in endpoint else endpoint.rpartition(":")[0]
-    return (host or "") in LOOPBACK
+    try:
+        return parse_endpoint(endpoint).host in LOOPBACK
+    except EndpointError:
+        return False
 
 
 def client_command(target: Target, endpoint: str) -> list[str]:
@@ -164,23 +180,37 @@ def client_command(target: Target, endpoint: str) -> list[str]:
 
 
 async def measure(target: Target, progress: Progress | None = None, stop: asyncio.Event | None = None) -> Measurement:
-    """Run one measurement to the end (or until the client dies, or `stop` is set) and count everything."""
+    """Run one measurement to the end (or until the client dies or hangs, or `stop` is set) and count everything."""
     result = Measurement(target, conditions=conditions(target))
     cpu_start = cpu_counters()
     try:
-        await _measure(target, result, progress, stop or asyncio.Event())
+        await _measure(target, result, progress or (lambda run: None), stop or asyncio.Event())
     finally:
         finish_conditions(result, cpu_start)
     return result
 
 
-async def _measure(target: Target, result: Measurement, progress: Progress | None, stop: asyncio.Event) -> None:
+def interrupted(result: Measurement, stop: asyncio.Event, when: str = "") -> bool:
+    """True (and recorded) when the user has asked to stop."""
+    if not stop.is_set():
+        return False
+    if not result.ended:
+        result.ended = "interrupted by the user"
+        result.errors.append("interrupted by the user" + when)
+    return True
+
+
+async def _measure(target: Target, result: Measurement, progress: Progress, stop: asyncio.Event) -> None:
+    from softplc.latency.client_process import run_client
+
+    if interrupted(result, stop, " before the run started"):
+        return
     if target.endpoint is not None:
-        target = client_security(target)
-        result.target = target
         result.endpoint = target.endpoint
         result.same_clock = is_loopback(target.endpoint)
-        await _run_client(target, result, progress, stop)
+        target = client_security(target)
+        result.target = target
+        await run_client(target, result, progress, stop)
         return
     from softplc.adapters import build_adapters
     from softplc.clock import RealClock
@@ -205,125 +235,26 @@ async def _measure(target: Target, result: Measurement, progress: Progress | Non
             else:
                 result.endpoint = server.endpoint
             result.same_clock = True
-            await _run_client(target, result, progress, stop)
+            if not interrupted(result, stop, " before the client started"):
+                await run_client(target, result, progress, stop)
         finally:
             task = runtime.tasks[0]
             result.plc_task = {"interval_ms": task.interval * 1e3, "cycles": task.stats.cycles, "overruns": task.stats.overruns,
                                "start_latency_ms": task.stats.latency.summary(), "scan_ms": task.stats.scan.summary(),
-                               "program_state": task.programs[0].state.value, "program_error": task.programs[0].error}
+                               "program_state": task.programs[0].state.value, "program_error": task.programs[0].error,
+                               **_plc_counters(runtime)}
             await runtime.stop()
 
 
-async def _run_client(target: Target, result: Measurement, progress: Progress | None, stop: asyncio.Event) -> None:
-    started = time.monotonic()
-    env = dict(os.environ)
-    if target.password:
-        env["SOFTPLC_LATENCY_PASSWORD"] = target.password
-    # The client must import this very softplc, wherever the command was started from.
-    package_root = str(Path(__file__).resolve().parents[2])
-    env["PYTHONPATH"] = package_root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    process = await asyncio.create_subprocess_exec(
-        *client_command(target, result.endpoint), stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env=env
-    )
-    result.client_pid = process.pid
-    log.debug("client process %d started: %s", process.pid, target.label)
-    stderr_tail: collections.deque[str] = collections.deque(maxlen=40)
-    stderr_task = asyncio.create_task(_drain(process.stderr, stderr_tail))
-    done = False
-    last_handshakes: int | None = None
-    assert process.stdout is not None
-
-    async def interrupt() -> None:
-        await stop.wait()
-        result.errors.append("interrupted by the user")
-        process.terminate()
-
-    interrupter = asyncio.create_task(interrupt())
-    try:
-        async for raw in process.stdout:
-            try:
-                event = json.loads(raw)
-            except json.JSONDecodeError:
-                stderr_tail.append(raw.decode(errors="replace").rstrip())
-                continue
-            kind = event.get("type")
-            if kind == "hello":
-                result.driver = event.get("driver", "")
-                last_handshakes = event.get("handshakes")
-            elif kind in ("sample", "warmup"):
-                sample = Sample.from_event(event)
-                (result.samples if kind == "sample" else result.warmup).append(sample)
-                if sample.status == "missed" and kind == "sample":
-                    result.missed += 1
-                result.foreign += int(event.get("foreign") or 0)
-                if sample.plc_handshakes is not None:
-                    last_handshakes = sample.plc_handshakes
-            elif kind == "timeout":
-                result.timeouts += 1
-            elif kind == "error":
-                result.errors.append(str(event.get("message")))
-            elif kind == "done":
-                done = True
-            result.wall_seconds = time.monotonic() - started
-            if progress is not None:
-                progress(result)
-        result.client_exit = await process.wait()
-    except asyncio.CancelledError:
-        process.kill()
-        await process.wait()
-        raise
-    finally:
-        interrupter.cancel()
-        await stderr_task
-        result.client_stderr = list(stderr_tail)
-        result.wall_seconds = time.monotonic() - started
-    if not done:
-        if stop.is_set():
-            pass  # the user stopped it: no missed handshake to account for
-        elif result.client_exit and result.client_exit < 0:
-            result.errors.append(f"the client process was killed by signal {-result.client_exit}")
-        elif not result.errors:
-            result.errors.append(f"the client process exited with code {result.client_exit} before finishing")
-        if not stop.is_set():
-            await _reconcile(target, result, last_handshakes)
-
-
-async def _drain(stream: asyncio.StreamReader | None, tail: collections.deque[str]) -> None:
-    if stream is None:
-        return
-    async for line in stream:
-        tail.append(line.decode(errors="replace").rstrip())
-
-
-async def _reconcile(target: Target, result: Measurement, last_handshakes: int | None) -> None:
-    """After the client died: count the Ready it left unanswered and the answers it never reported."""
-    from softplc.latency.client import build_driver, build_parser
-
-    argv = client_command(target, result.endpoint)[3:]
-    try:
-        args = build_parser().parse_args(argv)
-        args.mode = "poll"  # one read at a time is all this needs
-        args.password = target.password
-        driver = build_driver(args)
-        await driver.connect()
-    except Exception as error:
-        result.errors.append(f"cannot read the PLC after the client died: {error}")
-        return
-    try:
-        # The PLC may be in the middle of a task: wait for it to ask for the next one.
-        deadline = time.monotonic() + target.ready_timeout()
-        snapshot = await driver.read()
-        while not snapshot.ready and time.monotonic() < deadline:
-            await asyncio.sleep(0.01)
-            snapshot = await driver.read()
-        if snapshot.ready:
-            result.missed += 1
-        if snapshot.handshakes is not None and last_handshakes is not None:
-            result.unreported += max(0, snapshot.handshakes - last_handshakes)
-    except Exception as error:
-        result.errors.append(f"cannot read the PLC after the client died: {error}")
-    finally:
-        await driver.close()
+def _plc_counters(runtime: Any) -> dict[str, Any]:
+    """The handshake program's own counters of things a client did wrong (programs/handshake.py)."""
+    counters = {}
+    for key, tag in (("unexpected_taskids", "Unexpected"), ("ready_raised_again", "BadAnswers")):
+        try:
+            counters[key] = runtime.db.value(tag)
+        except KeyError:
+            pass
+    return counters
 
 
 def cpu_counters() -> list[int] | None:
