@@ -82,6 +82,8 @@ async def run_naive(scenario: str, scan: float, samples: int) -> Measurement:
                         record.delay_ms if record else None, record.loops if record else None, None)
         (result.samples if event["type"] == "sample" else result.warmup).append(sample)
         result.missed += sample.status == "missed" and event["type"] == "sample"
+    result.connected = bool(events)
+    result.ended = "complete" if result.client_exit == 0 else "client died"
     if result.client_exit != 0:
         result.errors.append(f"naive client exited with {result.client_exit}: {stderr.decode()[-500:]}")
     finish_conditions(result, cpu_start)
@@ -168,7 +170,7 @@ def main() -> int:
     parser.add_argument("--protocols", default="opcua,modbus", help="comma-separated: opcua,modbus")
     parser.add_argument("--no-naive", action="store_true", help="leave out the naive baseline")
     parser.add_argument("--loop", choices=("asyncio", "uvloop"), default="asyncio")
-    parser.add_argument("--out", type=Path, help="write statistics.json, samples.csv, report.txt here")
+    parser.add_argument("--out", type=Path, help="write statistics.json, samples.csv (a label column per run), report.txt here")
     args = parser.parse_args()
     load_before = os.getloadavg()
     loop_factory = None

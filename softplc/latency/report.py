@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from softplc.latency.measurement import Measurement, Sample
+from softplc.latency.progress import plural
 from softplc.latency.statistics import DelayStatistics, share_at_most, summarize
 
 # Thesis Table 8: Beckhoff TwinCAT soft-PLC + its OPC server + a Python OPC client, 10 ms scan.
@@ -33,10 +34,24 @@ ROWS: tuple[tuple[str, str, bool], ...] = (
     ("Mean + std (ms)", "mean_plus_std", True),
     ("Total no. of samples", "samples", False),
     ("Worst delay (ms)", "worst", True),
-    ("≤ 20 ms (%)", "share_le_20", False),
-    ("> 20 and ≤ 40 ms (%)", "share_20_40", False),
-    ("> 40 ms (%)", "share_gt_40", False),
+    ("≤ 20 ms (%)", "share_le_20", True),
+    ("> 20 and ≤ 40 ms (%)", "share_20_40", True),
+    ("> 40 ms (%)", "share_gt_40", True),
 )
+# The number of samples behind each share (the thesis's are its rounded shares of its samples).
+SHARE_COUNTS = {"share_le_20": "count_le_20", "share_20_40": "count_20_40", "share_gt_40": "count_gt_40"}
+MODES = {"none": "None", "sign": "Sign", "signandencrypt": "SignAndEncrypt"}
+
+
+def security_mode(measurement: Measurement) -> str | None:
+    """The OPC UA security mode of a run (None, Sign, SignAndEncrypt); None for Modbus."""
+    target = measurement.target
+    if target.protocol != "opcua":
+        return None
+    if not target.security:
+        return "None"
+    first = target.security.split(",")[0].strip()
+    return MODES.get(first.lower().removeprefix("basic256sha256_"), first)
 
 
 def plc_delays(measurement: Measurement) -> list[float]:
@@ -88,6 +103,7 @@ def to_json(measurement: Measurement) -> dict[str, Any]:
         "scenario": target.scenario,
         "scan_ms": target.scan * 1000.0,
         "client": target.mode,
+        "security": security_mode(measurement),
         "endpoint": measurement.endpoint,
         "local_runtime": target.endpoint is None,
         "same_clock": measurement.same_clock,
@@ -97,6 +113,10 @@ def to_json(measurement: Measurement) -> dict[str, Any]:
         "warmup": len(measurement.warmup),
         "timeouts": measurement.timeouts,
         "missed": measurement.missed,
+        "missed_notes": measurement.missed_notes,
+        "not_attempted": measurement.not_attempted,
+        "connected": measurement.connected,
+        "ended": measurement.ended,
         "unreported": measurement.unreported,
         "foreign": measurement.foreign,
         "errors": measurement.errors,
@@ -136,7 +156,8 @@ def print_report(measurements: Sequence[Measurement], out: TextIO) -> None:
     scenarios = list(dict.fromkeys(m.target.scenario for m in measurements))
     for scenario in scenarios:
         runs = [m for m in measurements if m.target.scenario == scenario]
-        _print_table(scenario, runs, out)
+        if any(run.ok_samples for run in runs):  # a table of dashes tells nothing
+            _print_table(scenario, runs, out)
         for run in runs:
             _print_details(run, out)
         print(file=out)
@@ -146,7 +167,13 @@ def _print_table(scenario: str, runs: Sequence[Measurement], out: TextIO) -> Non
     thesis = THESIS_TABLE_8[scenario]
     scans = sorted({m.target.scan * 1000.0 for m in runs})
     scan_text = "/".join(f"{s:g}" for s in scans)
-    print(f"Handshake latency, case study IV — {scenario} scenario, PLC scan {scan_text} ms (thesis: {THESIS_SCAN_MS:g} ms)", file=out)
+    title = f"Handshake latency, case study IV — {scenario} scenario, PLC scan {scan_text} ms (thesis: {THESIS_SCAN_MS:g} ms)"
+    modes = {_short(run): security_mode(run) for run in runs if security_mode(run) is not None}
+    if len(set(modes.values())) == 1:
+        title += f"; OPC UA security {next(iter(modes.values()))}"
+    elif modes:
+        title += "; OPC UA security " + ", ".join(f"{name}: {mode}" for name, mode in modes.items())
+    print(title, file=out)
     header = ["", "thesis"]
     columns: list[list[str]] = []
     for run in runs:
@@ -156,18 +183,44 @@ def _print_table(scenario: str, runs: Sequence[Measurement], out: TextIO) -> Non
         plc, hires = stats["plc"], stats["hires"]
         plc_column, ratio_column, hires_column = [], [], []
         for _, key, shown in ROWS:
-            plc_column.append(_cell(getattr(plc, key), 1 if key != "samples" else 0))
+            plc_column.append(_stat_cell(plc, key, 1))
             ratio = _ratio(getattr(plc, key), thesis[key]) if shown else None
             ratio_column.append(f"{ratio:.2f}" if ratio is not None else "")
-            hires_column.append(_cell(getattr(hires, key), 2 if key != "samples" else 0))
+            hires_column.append(_stat_cell(hires, key, 2))
         columns += [plc_column, ratio_column, hires_column]
     rows = []
     for index, (label, key, _) in enumerate(ROWS):
         thesis_value = thesis[key]
-        row = [label, f"{thesis_value:g}"]
+        thesis_cell = f"{thesis_value:g}"
+        if key in SHARE_COUNTS:
+            thesis_cell += f" (≈{round(thesis_value * thesis['samples'] / 100):d})"
+        row = [label, thesis_cell]
         row += [column[index] for column in columns]
         rows.append(row)
     _table(rows, header, out)
+    print("shares: % (number of samples); ×thesis: ours / the thesis's, for a share our % / its % (few samples say little)", file=out)
+
+
+def _stat_cell(stats: DelayStatistics, key: str, digits: int) -> str:
+    if key == "samples":
+        return str(stats.samples)
+    cell = _cell(getattr(stats, key), digits)
+    if key in SHARE_COUNTS and stats.samples:
+        cell += f" ({getattr(stats, SHARE_COUNTS[key])})"
+    return cell
+
+
+def outcome(run: Measurement) -> str:
+    """Requested, measured, missed, not attempted, and why the run ended."""
+    target = run.target
+    if target.duration is not None:
+        requested = f"requested {target.duration:g} s"
+    else:
+        requested = f"requested {plural(target.samples or 0, 'sample')}"
+    parts = [requested, f"measured {len(run.ok_samples)}", f"missed {run.missed}"]
+    if run.not_attempted is not None:
+        parts.append(f"not attempted {run.not_attempted}")
+    return " · ".join(parts) + f" · run ended: {run.ended or ('complete' if run.complete else 'error')}"
 
 
 def _short(run: Measurement) -> str:
@@ -185,8 +238,11 @@ def _print_details(run: Measurement, out: TextIO) -> None:
     target = run.target
     print(f"\n{_short(run)} — {run.driver or run.endpoint}", file=out)
     where = "our runtime (real time)" if target.endpoint is None else f"--endpoint {run.endpoint}"
-    print(f"  PLC: {where}; {len(run.ok_samples)} samples in {run.wall_seconds:.0f} s "
-          f"(+{len(run.warmup)} warm-up answer not counted)", file=out)
+    warmup = f" (+{plural(len(run.warmup), 'warm-up answer')}, not counted)" if run.warmup else ""
+    print(f"  PLC: {where}; {plural(len(run.ok_samples), 'sample')} in {run.wall_seconds:.0f} s{warmup}", file=out)
+    print(f"  {outcome(run)}", file=out)
+    for note in run.missed_notes:
+        print(f"  missed: {note}", file=out)
     share = one_scan_share(run)
     if share is not None:
         print(f"  seen at the next scan (the floor): {share:.2f} % of samples", file=out)
@@ -202,6 +258,9 @@ def _print_details(run: Measurement, out: TextIO) -> None:
     counters = f"timeouts {run.timeouts} · missed {run.missed} · unreported {run.unreported}"
     if run.foreign:
         counters += f" · switches by another client {run.foreign}"
+    if "unexpected_taskids" in run.plc_task:
+        # programs/handshake.py: TaskIDs written while a task ran; Readys cleared without a new TaskID.
+        counters += f" · PLC's Unexpected {run.plc_task['unexpected_taskids']} · BadAnswers {run.plc_task.get('ready_raised_again', 0)}"
     print(f"  {counters}", file=out)
     for error in run.errors:
         print(f"  ERROR: {error}", file=out)
@@ -235,7 +294,7 @@ def _table(rows: list[list[str]], header: list[str], out: TextIO) -> None:
         print("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(row, widths))).rstrip(), file=out)
 
 
-CSV_FIELDS = ("protocol", "scenario", "scan_ms", "kind", "index", "task_id", "status", "ready_stamp", "t_seen", "t_sent", "t_done",
+CSV_FIELDS = ("label", "protocol", "scenario", "scan_ms", "kind", "index", "task_id", "status", "ready_stamp", "t_seen", "t_sent", "t_done",
               "plc_delay_ms", "plc_delay_scans", "plc_handshakes", "hires_ms", "notify_ms", "respond_ms")
 
 
@@ -254,7 +313,7 @@ def _csv_row(run: Measurement, kind: str, sample: Sample) -> list[Any]:
     def fmt(value: float | None, digits: int) -> str:
         return "" if value is None else f"{value:.{digits}f}"
 
-    return [run.target.protocol, run.target.scenario, f"{run.target.scan * 1000.0:g}", kind, sample.index, sample.task_id, sample.status,
+    return [run.label or _short(run), run.target.protocol, run.target.scenario, f"{run.target.scan * 1000.0:g}", kind, sample.index, sample.task_id, sample.status,
             fmt(sample.ready_stamp, 6), fmt(sample.t_seen, 6), fmt(sample.t_sent, 6), fmt(sample.t_done, 6),
             fmt(sample.plc_delay_ms, 3), "" if sample.plc_delay_scans is None else sample.plc_delay_scans,
             "" if sample.plc_handshakes is None else sample.plc_handshakes,

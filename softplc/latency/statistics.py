@@ -51,6 +51,9 @@ class DelayStatistics:
     share_le_20: float | None  # percent of samples ≤ 20 ms
     share_20_40: float | None  # percent > 20 ms and ≤ 40 ms
     share_gt_40: float | None  # percent > 40 ms
+    count_le_20: int  # the samples behind each share
+    count_20_40: int
+    count_gt_40: int
     percentiles: dict[str, float] = field(default_factory=dict)  # "p50" → ms
     histogram: Histogram | None = None
 
@@ -65,14 +68,15 @@ def summarize(delays_ms: Sequence[float], *, bin_width: float | None = None, max
         raise ValueError("delays must be finite numbers; count timeouts separately")
     n = int(values.size)
     if n == 0:
-        return DelayStatistics(0, None, None, None, None, None, None, None, None, {}, None)
+        return DelayStatistics(0, None, None, None, None, None, None, None, None, 0, 0, 0, {}, None)
     mean = float(values.mean())
     std = float(values.std(ddof=1)) if n > 1 else None
-    shares = (
-        100.0 * int(np.count_nonzero(values <= 20.0)) / n,
-        100.0 * int(np.count_nonzero((values > 20.0) & (values <= 40.0))) / n,
-        100.0 * int(np.count_nonzero(values > 40.0)) / n,
+    counts = (
+        int(np.count_nonzero(values <= 20.0)),
+        int(np.count_nonzero((values > 20.0) & (values <= 40.0))),
+        int(np.count_nonzero(values > 40.0)),
     )
+    shares = tuple(100.0 * count / n for count in counts)
     percentiles = {_percentile_name(q): float(np.percentile(values, q)) for q in PERCENTILES}
     return DelayStatistics(
         samples=n,
@@ -84,6 +88,9 @@ def summarize(delays_ms: Sequence[float], *, bin_width: float | None = None, max
         share_le_20=shares[0],
         share_20_40=shares[1],
         share_gt_40=shares[2],
+        count_le_20=counts[0],
+        count_20_40=counts[1],
+        count_gt_40=counts[2],
         percentiles=percentiles,
         histogram=histogram(values, bin_width, max_bins=max_bins),
     )
