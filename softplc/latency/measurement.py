@@ -150,7 +150,7 @@ class Measurement:
         """Requested samples never attempted (the run ended first); None for a --duration run."""
         if self.target.samples is None or self.target.duration is not None:
             return None
-        attempted = len(self.samples) + len(self.missed_notes)
+        attempted = len(self.samples) + len(self.missed_notes) + self.unreported
         return max(0, self.target.samples - attempted)
 
 
