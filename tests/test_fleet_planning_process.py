@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
+
+import pytest
 
 from softplc.clock import RealClock, SimClock
 from softplc.fleet.driver import PlanRequest, run_plan
@@ -67,3 +74,27 @@ async def test_simulated_fleets_plan_inline(tmp_path: Path) -> None:
     async with Plant(tagdb, load_map(FACTORY), SimClock()) as plant:
         assert plant.fleet._planning is None
         assert all(loop.planning is not None and isinstance(loop.planning, ClockPlanning) for loop in plant.fleet.loops.values())
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.1, 0.2, 0.3, 0.4, 0.5])
+def test_ctrl_c_while_the_planning_worker_starts_never_hangs(tmp_path: Path, delay: float) -> None:
+    # Ctrl-C reaches the whole process group. A worker that died half-way through its start
+    # once left `softplc run` blocked for good writing the planners into its pipe.
+    process = subprocess.Popen(
+        [sys.executable, "-m", "softplc.cli", "run", str(REPO / "tagdb.yaml"), "--no-servers", "--no-status",
+         "--state-dir", str(tmp_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True, cwd=REPO,
+    )
+    try:
+        assert process.stdout is not None
+        header = process.stdout.readline()  # printed before the adapters (and the worker) start
+        assert header.startswith("softplc "), header
+        time.sleep(delay)  # where in the start-up the signal lands, not a wait for a result
+        os.killpg(process.pid, signal.SIGINT)
+        output, _ = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    assert process.returncode in (0, 130), output
+    assert "Traceback" not in output, output

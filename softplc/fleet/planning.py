@@ -4,8 +4,8 @@ A plan is pure Python and takes up to ~45 ms on the factory map. Run in a thread
 interpreter's lock (the GIL) all that time, and each time the event loop wants the lock back it
 waits up to the switch interval (5 ms): a 10 ms scan task then started 5-12 ms late whenever a
 robot planned (`bench/scan_jitter.py`). A worker process has an interpreter of its own, so the
-scan never waits for a plan. The planners (the inflated maps) are sent to the worker once, when
-it starts; each request carries only its start, goal and temporary obstacles.
+scan never waits for a plan. The planners (the inflated maps) are sent to the worker once, as
+its first task; each request carries only its start, goal and temporary obstacles.
 """
 
 from __future__ import annotations
@@ -15,8 +15,9 @@ import logging
 import multiprocessing
 import os
 import signal
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -49,15 +50,24 @@ _Transit = tuple[int, int, tuple[float, float], tuple[float, float], list[Disc],
 _worker_planners: list[PathPlanner] = []
 
 
-def _start_worker(planners: list[PathPlanner]) -> None:
-    """Worker initialiser: keep the planners; normal scheduling; leave Ctrl-C to the runtime."""
-    global _worker_planners
-    _worker_planners = planners
+def _start_worker() -> None:
+    """Worker initialiser: leave Ctrl-C to the runtime; normal scheduling."""
+    # The worker was started with SIGINT blocked (see _sigint_blocked): ignore it for good
+    # before unblocking, so a Ctrl-C at the terminal (sent to the whole process group) is the
+    # runtime's to handle, and never kills the worker half-way.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     # Under `softplc run --rt-priority` the worker would inherit SCHED_FIFO and could starve
     # the scan on a small machine: planning is background work.
     if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) != os.SCHED_OTHER:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+def _install(planners: list[PathPlanner]) -> int:
+    global _worker_planners
+    _worker_planners = planners
+    return os.getpid()
 
 
 def _plan_in_worker(transit: _Transit) -> Plan:
@@ -65,8 +75,17 @@ def _plan_in_worker(transit: _Transit) -> Plan:
     return run_plan(PlanRequest(serial, _worker_planners[index], start, goal, discs, keep_out, detour, make_way))
 
 
-def _ready() -> bool:
-    return bool(_worker_planners)
+@contextmanager
+def _sigint_blocked() -> Iterator[None]:
+    """Block SIGINT in this thread meanwhile; a process started meanwhile inherits the block."""
+    if not hasattr(signal, "pthread_sigmask"):  # not POSIX: nothing to block
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 class ProcessPlanning:
@@ -76,24 +95,25 @@ class ProcessPlanning:
     through `fallback` instead.
     """
 
-    def __init__(self, planners: Sequence[PathPlanner], fallback: Planning, *, workers: int = 1) -> None:
+    def __init__(self, planners: Sequence[PathPlanner], fallback: Planning) -> None:
         self._planners = list(planners)
         self._index = {id(planner): index for index, planner in enumerate(self._planners)}
         self._fallback = fallback
-        self._workers = workers
         self._pool: ProcessPoolExecutor | None = None
+        self.worker_pid: int | None = None
 
     async def start(self) -> None:
         """Start the worker and wait until it holds the planners (about half a second)."""
         # spawn, not fork: forking a process that runs an event loop and threads is unsafe.
-        self._pool = ProcessPoolExecutor(
-            self._workers,
-            mp_context=multiprocessing.get_context("spawn"),
-            initializer=_start_worker,
-            initargs=(self._planners,),
-        )
+        # One worker: the planners are its first task, and it plans one request at a time.
+        self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=_start_worker)
         loop = asyncio.get_running_loop()
-        await asyncio.gather(*(loop.run_in_executor(self._pool, _ready) for _ in range(self._workers)))
+        # The worker process is started by this first submit. The planners go through the
+        # pool's queue, written by its feeder thread: a payload bigger than a pipe's buffer
+        # never blocks the event loop, even if the worker died meanwhile.
+        with _sigint_blocked():
+            installed = loop.run_in_executor(self._pool, _install, self._planners)
+        self.worker_pid = await installed
 
     async def run(self, request: PlanRequest) -> Plan:
         index = self._index.get(id(request.planner))
