@@ -7,13 +7,9 @@ command -v mbpoll >/dev/null 2>&1 || apt_packages+=(mbpoll)
 # node-opcua (tests/node) needs Node.js >= 18 and npm.
 command -v npm >/dev/null 2>&1 || apt_packages+=(nodejs npm)
 if [ ${#apt_packages[@]} -gt 0 ]; then
-  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
-    echo "installing system packages: ${apt_packages[*]}" >&2
-    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${apt_packages[@]}") >/dev/null 2>&1 \
-      || echo "warning: could not install ${apt_packages[*]}; tests that need them will say so" >&2
-  else
-    echo "warning: not root or no apt-get; missing: ${apt_packages[*]}" >&2
-  fi
+  echo "installing system packages: ${apt_packages[*]}" >&2
+  scripts/apt-install.sh "${apt_packages[@]}" \
+    || echo "warning: could not install ${apt_packages[*]}; tests that need them will say so" >&2
 fi
 if command -v npm >/dev/null 2>&1 && [ ! -d tests/node/node_modules/node-opcua-client ] && [ -f tests/node/package.json ]; then
   (cd tests/node && npm install --silent --no-audit --no-fund >/dev/null 2>&1) \

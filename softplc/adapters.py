@@ -20,9 +20,10 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("servers")
     group.add_argument("--no-servers", action="store_true", help="start no protocol server (scan only)")
     # Modbus TCP (softplc.modbus)
+    from softplc.modbus.settings import host_name as modbus_host
     from softplc.modbus.settings import port_number as modbus_port
 
-    group.add_argument("--modbus-host", metavar="HOST", help="Modbus TCP bind address (default servers.modbus.host, 127.0.0.1)")
+    group.add_argument("--modbus-host", type=modbus_host, metavar="HOST", help="Modbus TCP bind address (default servers.modbus.host, 127.0.0.1)")
     group.add_argument("--modbus-port", type=modbus_port, metavar="PORT", help="Modbus TCP port (default servers.modbus.port, 5020; 0 = any free port)")
     group.add_argument("--no-modbus", action="store_true", help="do not start the Modbus TCP server")
     # OPC UA (softplc.opcua)
@@ -37,13 +38,24 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) -> list[Adapter]:
-    """The adapters to start for this plant, honouring command-line overrides in `args`."""
+    """The adapters to start for this plant, honouring command-line overrides in `args`.
+
+    Raises one ConfigError with the problems of every adapter's section, not just the first's.
+    """
+    from softplc.yamlsource import ConfigError, Problem
+
+    builders = [_fleet]  # robots are not servers: --no-servers keeps them
+    if not (args is not None and getattr(args, "no_servers", False)):
+        builders += [_opcua, _modbus]
     adapters: list[Adapter] = []
-    adapters.extend(_fleet(config, args))  # robots are not servers: --no-servers keeps them
-    if args is not None and getattr(args, "no_servers", False):
-        return adapters
-    adapters.extend(_opcua(config, args))
-    adapters.extend(_modbus(config, args))
+    problems: list[Problem] = []
+    for build in builders:
+        try:
+            adapters.extend(build(config, args))
+        except ConfigError as error:
+            problems.extend(error.problems)
+    if problems:
+        raise ConfigError(problems)
     return adapters
 
 
@@ -56,6 +68,10 @@ def _modbus(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapte
         disable=bool(getattr(args, "no_modbus", False)),
     )
     if not settings.enabled:
+        if any("modbus" in tag.options for tag in config.tags):
+            from softplc.modbus.address_map import build_address_map
+
+            build_address_map(config, settings)  # addresses pinned in the tags are checked even while the server is off
         return []
     from softplc.modbus.server import ModbusAdapter
 

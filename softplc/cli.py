@@ -13,6 +13,7 @@ import csv
 import importlib
 import json
 import logging
+import math
 import signal
 import sys
 import time
@@ -37,13 +38,13 @@ log = logging.getLogger("softplc")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    _configure_logging(args.verbose - args.quiet)
-    if not hasattr(args, "func"):
-        parser.print_help()
-        return EXIT_FAILURE
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        _configure_logging(args.verbose - args.quiet)
+        if not hasattr(args, "func"):
+            parser.print_help()
+            return EXIT_FAILURE
         return int(args.func(args) or 0)
     except ConfigError as error:
         _print_problems(error)
@@ -77,9 +78,10 @@ def build_parser() -> argparse.ArgumentParser:
         "softplc run --sim --until 't01_qSL >= 100 or t02_qSL >= 100'",
     )
     run.add_argument("config", nargs="?", default=DEFAULT_CONFIG, help=f"plant configuration (default {DEFAULT_CONFIG})")
-    run.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of runtime clock")
-    run.add_argument("--sim", action="store_true", help="simulated clock: as fast as possible, identical results every run")
-    run.add_argument("--speed", type=float, metavar="N", help="with --sim: run N times faster than real time")
+    run.add_argument("--duration", type=_positive_number, metavar="S", help="stop after S seconds of scanning (runtime clock)")
+    run.add_argument("--sim", action="store_true", help="simulated clock: as fast as possible, identical results every run "
+                     "(starts from the initial values; retained values are neither restored nor saved)")
+    run.add_argument("--speed", type=_positive_number, metavar="N", help="with --sim: run N times faster than real time")
     run.add_argument("--until", metavar="EXPR", help="stop when EXPR over tag names holds, e.g. 't01_qSL >= 100'")
     run.add_argument("--state-dir", type=Path, metavar="DIR", help="where retained values etc. are kept (default .softplc next to CONFIG)")
     run.add_argument("--no-status", action="store_true", help="no live status line")
@@ -120,6 +122,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _positive_number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, not {text}")
+    return value
+
+
 def _configure_logging(verbosity: int) -> None:
     level = logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG
     logging.basicConfig(level=level, format="softplc: %(levelname)s: %(message)s", stream=sys.stderr, force=True)
@@ -142,9 +154,13 @@ def _print_problems(error: ConfigError, stream: TextIO | None = None) -> None:
 def cmd_check(args: argparse.Namespace) -> int:
     from softplc.adapters import build_adapters
 
+    from softplc.runtime import Runtime
+
     config = load_config(args.config)
-    # Building (not starting) the adapters checks what only they know: the Modbus address
-    # map, OPC UA security settings, the fleet's robots, tasks and map files.
+    # Building (not starting) the runtime creates every program instance, and building the
+    # adapters checks what only they know: the Modbus address map, OPC UA security settings,
+    # the fleet's robots, tasks and map files.
+    Runtime(config, SimClock())
     build_adapters(config, None)
     print(f"{args.config}: OK — {summary(config)}")
     return EXIT_OK
@@ -189,8 +205,9 @@ def cmd_tags(args: argparse.Namespace) -> int:
         writer.writeheader()
         writer.writerows(rows)
     else:
-        columns = ("name", "type", "initial", "unit", "access", "min", "max", "group", "description")
-        print_table([[("" if row[c] is None else str(row[c])) for c in columns] for row in rows], columns)
+        columns = ("name", "type", "initial", "unit", "access", "min", "max", "retain", "group", "description")
+        cells = [{**row, "retain": "yes" if row["retain"] else None} for row in rows]
+        print_table([[("" if cell[c] is None else str(cell[c])) for c in columns] for cell in cells], columns)
     return EXIT_OK
 
 
@@ -215,9 +232,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.speed is not None and not args.sim:
         print("softplc: --speed needs --sim (real time always runs at speed 1)", file=sys.stderr)
         return EXIT_FAILURE
-    if args.speed is not None and args.speed <= 0:
-        print("softplc: --speed must be positive", file=sys.stderr)
-        return EXIT_FAILURE
     until = None
     runtime_probe_names = [d.name for d in config.tags]
     if args.until:
@@ -227,7 +241,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             until = Condition(args.until, runtime_probe_names + [d.name for d in system_tag_definitions(config.tasks)])
         except ExpressionError as error:
             print(f"softplc: --until: {error}", file=sys.stderr)
-            return EXIT_FAILURE
+            return EXIT_CONFIG
     loop_factory = None
     if args.loop == "uvloop":
         try:
@@ -245,7 +259,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             print(f"softplc: --rt-priority: {error}", file=sys.stderr)
             return EXIT_FAILURE
     clock = SimClock(speed=args.speed) if args.sim else RealClock()
-    runtime = Runtime(config, clock, state_dir=args.state_dir)
+    # A simulated run starts from the initial values and leaves the retained ones alone, so
+    # it gives the same result every time and never disturbs the real plant's state.
+    runtime = Runtime(config, clock, state_dir=args.state_dir, retain=not args.sim)
     for adapter in build_adapters(config, args):
         runtime.add_adapter(adapter)
     show_status = not args.no_status and sys.stderr.isatty()
@@ -289,15 +305,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     if show_status:
         print(file=sys.stderr)
     wall = time.monotonic() - started
-    print(f"stopped: {reason or 'stopped'} — runtime clock {runtime.clock.now():.1f} s in {wall:.1f} s wall time", file=sys.stderr)
+    scanned = runtime.clock.now() - (runtime.started_at if runtime.started_at is not None else runtime.clock.now())
+    clock_name = "simulated" if args.sim else "real"
+    print(f"stopped: {reason or 'stopped'} — scanned {scanned:.1f} s of {clock_name} time; {wall:.1f} s wall time with start-up", file=sys.stderr)
     print_task_statistics(runtime, sys.stderr)
     return EXIT_OK if runtime.error == "" else EXIT_FAILURE
 
 
 async def _status_loop(runtime: Any, show: bool, args: argparse.Namespace) -> None:
     """Announce the adapters once they are up, then keep a one-line status (real time)."""
-    while runtime.state.value == "STARTING":
-        await asyncio.sleep(0.05)
+    await runtime.running.wait()
     for adapter in runtime.adapters:
         print(f"serving: {adapter.describe()}", file=sys.stderr)
     if not runtime.adapters:

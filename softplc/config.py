@@ -6,13 +6,13 @@ together by raising `ConfigError`. Nothing here starts anything.
 
 from __future__ import annotations
 
-import difflib
 import importlib
 import importlib.util
 import inspect
+import math
 import re
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -22,6 +22,7 @@ from softplc.durations import parse_duration
 from softplc.program import Program
 from softplc.scan import RestartPolicy
 from softplc.schema import CONFIG_SCHEMA, NAME_PATTERN, NAME_RULE
+from softplc.suggest import did_you_mean
 from softplc.tags import Access, TagDef
 from softplc.yamlsource import ConfigError, Location, Problem, SourceMap, load_yaml, parse_yaml
 
@@ -40,6 +41,7 @@ class ProgramConfig:
     params: dict[str, Any]
     restart: RestartPolicy
     enabled: bool = True
+    location: Location | None = None  # where the program is named in the file (for errors)
 
 
 @dataclass
@@ -96,12 +98,6 @@ def parse_config(text: str, path: str | Path = "<string>") -> PlantConfig:
     """Check configuration text as if read from `path` (programs resolve relative to it)."""
     data, source = parse_yaml(text, str(path))
     return _Checker(Path(path), data, source).check()
-
-
-def did_you_mean(word: str, choices: Iterable[str]) -> str:
-    """' (did you mean 'x'?)' when a choice is close to `word`, else ''."""
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    return f" (did you mean '{close[0]}'?)" if close else ""
 
 
 # -- structural checks (JSON Schema) --------------------------------------------------------
@@ -431,6 +427,9 @@ class _Checker:
                 if not data_type.is_numeric:
                     self.problem((*path, bound_name), f"'{bound_name}' is only allowed for numeric tags, not {data_type.value}", at_key=True)
                     ok = False
+                elif bound != bound:
+                    self.problem((*path, bound_name), f"{bound_name} must be a number, not NaN")
+                    ok = False
                 else:
                     try:
                         data_type.coerce(bound)
@@ -453,7 +452,10 @@ class _Checker:
             ok = False
         else:
             if data_type.is_numeric and ok:
-                if isinstance(low, (int, float)) and initial < low:
+                if initial != initial and (low is not None or high is not None):
+                    self._problem_at(initial_path, f"initial value of '{name}' is NaN, which is outside the range of a bounded tag")
+                    ok = False
+                elif isinstance(low, (int, float)) and initial < low:
                     self._problem_at(initial_path, f"initial value {initial} of '{name}' is below its min {low}{hint}")
                     ok = False
                 if isinstance(high, (int, float)) and initial > high:
@@ -480,6 +482,9 @@ class _Checker:
     # -- tasks and programs -------------------------------------------------------------
 
     def _duration(self, value: Any, path: tuple[Any, ...], what: str) -> float | None:
+        if isinstance(value, float) and not math.isfinite(value):
+            self.problem(path, f"bad {what} {value!r}: must be a finite duration such as 10ms, 100ms or 1s")
+            return None
         if isinstance(value, (int, float)) and not isinstance(value, bool) and value <= 0:
             self.problem(path, f"bad {what} {value!r}: must be greater than zero")
             return None
@@ -559,7 +564,8 @@ class _Checker:
             params = self._check_params(cls, spec.get("params") or {}, substitution, path, name)
             if cls is None or bindings is None or params is None:
                 continue
-            results.append(ProgramConfig(name, spec["program"], cls, bindings, params, restart, bool(spec.get("enabled", True))))
+            location = self.source.value((*path, "program"))
+            results.append(ProgramConfig(name, spec["program"], cls, bindings, params, restart, bool(spec.get("enabled", True)), location))
         return results
 
     def _import_program(self, reference: str, path: tuple[Any, ...]) -> type[Program] | None:
@@ -673,8 +679,12 @@ def import_program(reference: str, base_dir: Path) -> type[Program]:
                 sys.path.insert(0, base)
             module = importlib.import_module(module_name)
     except ModuleNotFoundError as error:
-        where = f"{base_dir.resolve()} (the configuration's folder) or the installed packages"
-        raise ImportError(f"cannot load program '{reference}': no module named '{error.name}' in {where}") from None
+        missing = error.name or ""
+        if module_name == missing or module_name.startswith(missing + "."):
+            where = f"{base_dir.resolve()} (the configuration's folder) or the installed packages"
+            raise ImportError(f"cannot load program '{reference}': no module named '{missing}' in {where}") from None
+        # The program's module exists, but something it imports does not.
+        raise ImportError(f"cannot load program '{reference}': module {module_name} imports '{missing}', which is not installed") from None
     except Exception as error:  # user code may raise anything while importing
         raise ImportError(f"cannot load program '{reference}': {type(error).__name__}: {error}") from None
     cls = getattr(module, class_name, None)

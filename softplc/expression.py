@@ -11,6 +11,8 @@ import operator
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from softplc.suggest import did_you_mean
+
 _BINARY: dict[type, Callable[[Any, Any], Any]] = {
     ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
     ast.Mod: operator.mod, ast.FloorDiv: operator.floordiv, ast.Pow: operator.pow,
@@ -54,11 +56,7 @@ class Condition:
             if name in _CONSTANTS:
                 return
             if name not in known:
-                import difflib
-
-                close = difflib.get_close_matches(name, list(known), n=1)
-                hint = f" (did you mean '{close[0]}'?)" if close else ""
-                raise ExpressionError(f"unknown tag '{name}' in condition{hint}")
+                raise ExpressionError(f"unknown tag '{name}' in condition{did_you_mean(name, known)}")
             self.names.add(name)
             return
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float, str, bool)):

@@ -26,6 +26,7 @@ from softplc.stall import StallDetector
 from softplc.systags import SystemTags, system_tag_definitions
 from softplc.tagdb import TagDatabase
 from softplc.tags import Tag
+from softplc.yamlsource import ConfigError, Location, Problem
 
 log = logging.getLogger(__name__)
 
@@ -59,7 +60,8 @@ class AdapterError(RuntimeError):
 class Runtime:
     """One plant: its tags, tasks and adapters, on one clock."""
 
-    def __init__(self, config: PlantConfig, clock: Clock | None = None, *, state_dir: Path | None = None) -> None:
+    def __init__(self, config: PlantConfig, clock: Clock | None = None, *, state_dir: Path | None = None, retain: bool = True) -> None:
+        """`retain=False`: start from the initial values and leave the retained ones alone (a simulated run)."""
         self.config = config
         self.clock = clock or RealClock()
         self.state_dir = state_dir or config.state_dir
@@ -77,6 +79,9 @@ class Runtime:
         self._stall: tuple[Task, str, str] | None = None
         self._stall_detector: StallDetector | None = None
         self._retain: RetainStore | None = None
+        self._retain_enabled = retain
+        self.running = asyncio.Event()  # set once every adapter has started and scanning begins
+        self.started_at: float | None = None  # clock time when scanning began
         self._retain_dirty: dict[str, Tag] = {}
         self._started = False
         self._drive: asyncio.Task[Any] | None = None
@@ -84,12 +89,13 @@ class Runtime:
     def _build_task(self, task: Any) -> Task:
         instances = []
         for program in task.programs:
-            instance = ProgramInstance(
-                program.name,
-                program.cls(ProgramContext(program.name, self.clock, dict(program.params))),
-                program.bindings,
-                program.restart,
-            )
+            try:
+                created = program.cls(ProgramContext(program.name, self.clock, dict(program.params)))
+            except Exception as error:  # user code: say which program and where, never a traceback
+                where = program.location or Location(str(self.config.path), 1, 1)
+                message = f"program '{program.name}' ({program.reference}) cannot be created: {type(error).__name__}: {error}"
+                raise ConfigError([Problem(where, message)]) from error
+            instance = ProgramInstance(program.name, created, program.bindings, program.restart)
             if not program.enabled:
                 instance.state = ProgramState.STOPPED
             instances.append(instance)
@@ -137,7 +143,8 @@ class Runtime:
             raise RuntimeError("runtime already started")
         self._started = True
         self._stop_event = asyncio.Event()
-        self._load_retained()
+        if self._retain_enabled:
+            self._load_retained()
         self.engine.start_programs()
         self.system_tags.publish(self.clock.now())
         started: list[Adapter] = []
@@ -159,6 +166,8 @@ class Runtime:
         self.spawn(self._housekeeping(), "housekeeping")
         self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after())
         self._stall_detector.start()
+        self.started_at = self.clock.now()
+        self.running.set()
 
     async def stop(self) -> None:
         """Stop scanning, stop adapters, save retained values. Safe to call twice."""

@@ -69,7 +69,10 @@ def cli(capsys: pytest.CaptureFixture[str]) -> Iterator[Callable[..., tuple[int,
     handlers, level = root.handlers[:], root.level
 
     def run(*args: str) -> tuple[int, str, str]:
-        code = main([str(arg) for arg in args])
+        try:
+            code = main([str(arg) for arg in args])
+        except SystemExit as exit:  # argparse refused an option
+            code = int(exit.code or 0)
         out, err = capsys.readouterr()
         return code, out, err
 
@@ -134,7 +137,7 @@ def test_tags_json_csv_table(cli, plant: Path) -> None:
     code, out, _ = cli("tags", plant, "--no-system")
     assert code == 0
     lines = out.splitlines()
-    assert lines[0].split() == ["name", "type", "initial", "unit", "access", "min", "max", "group", "description"]
+    assert lines[0].split() == ["name", "type", "initial", "unit", "access", "min", "max", "retain", "group", "description"]
     assert set(lines[1]) == {"-", " "}
     assert len(lines) == 2 + 9
     assert lines[2].split() == ["l1_a", "float64", "1.0", "m", "rw", "Lines/l1"]
@@ -151,9 +154,8 @@ def test_schema_command_prints_a_valid_json_schema_the_default_plant_meets(cli) 
 
 @pytest.mark.parametrize("command", [[], ["run"], ["check"], ["tags"], ["schema"]])
 def test_help_everywhere(cli, command: list[str]) -> None:
-    with pytest.raises(SystemExit) as exited:
-        cli(*command, "--help")
-    assert exited.value.code == 0
+    code, out, _ = cli(*command, "--help")
+    assert code == 0 and out.startswith("usage: softplc")
 
 
 def test_run_help_mentions_loop_choice(capsys) -> None:
@@ -169,7 +171,7 @@ def test_run_until_a_tag_condition(cli, plant: Path, tmp_path: Path) -> None:
     code, _, err = cli("run", plant, "--sim", "--until", "l1_scans >= 25 and l2_total == 3", "--no-status", "--state-dir", tmp_path)
     assert code == 0, err
     # cycles at 0, 10, ..., 240 ms: the 25th ends the run at 0.24 s
-    assert "stopped: condition met: l1_scans >= 25 and l2_total == 3 — runtime clock 0.2 s" in err
+    assert "stopped: condition met: l1_scans >= 25 and l2_total == 3 — scanned 0.2 s of simulated time" in err
     assert statistics(err)["fast"][2] == "25"
 
 
@@ -177,13 +179,14 @@ def test_run_until_a_system_tag(cli, plant: Path, tmp_path: Path) -> None:
     code, _, err = cli("run", plant, "--sim", "--until", "_sys.fast.cycles >= 30", "--no-status", "--state-dir", tmp_path)
     assert code == 0, err
     # system tags are published every 0.5 s, so the condition is seen at 0.5 s
-    assert "stopped: condition met: _sys.fast.cycles >= 30 — runtime clock 0.5 s" in err
+    assert "stopped: condition met: _sys.fast.cycles >= 30 — scanned 0.5 s of simulated time" in err
 
 
 @pytest.mark.parametrize(
     ("until", "message"),
     [
         ("l1_scan >= 3", "softplc: --until: unknown tag 'l1_scan' in condition (did you mean 'l1_scans'?)"),
+        ("L1_Scans >= 3", "softplc: --until: unknown tag 'L1_Scans' in condition (did you mean 'l1_scans'?)"),
         ("_sys.fast.cycle > 3", "softplc: --until: unknown tag '_sys.fast.cycle' in condition (did you mean '_sys.fast.cycles'?)"),
         ("l1_scans >=", "softplc: --until: cannot parse 'l1_scans >=': invalid syntax"),
         ("__import__('os')", "softplc: --until: not allowed in a condition: \"__import__('os')\""),
@@ -191,15 +194,19 @@ def test_run_until_a_system_tag(cli, plant: Path, tmp_path: Path) -> None:
 )
 def test_run_until_errors(cli, plant: Path, until: str, message: str) -> None:
     code, _, err = cli("run", plant, "--sim", "--until", until)
-    assert code == 1
+    assert code == 2
     assert err.strip() == message
 
 
 def test_speed_needs_sim_and_must_be_positive(cli, plant: Path) -> None:
     code, _, err = cli("run", plant, "--speed", "10", "--duration", "1")
     assert code == 1 and "--speed needs --sim" in err
-    code, _, err = cli("run", plant, "--sim", "--speed", "0", "--duration", "1")
-    assert code == 1 and "--speed must be positive" in err
+    for bad in ("0", "-2", "nan", "inf", "fast"):
+        code, _, err = cli("run", plant, "--sim", "--speed", bad, "--duration", "1")
+        assert code == 2 and "argument --speed: " in err, (bad, err)
+    for bad in ("0", "-5", "nan", "inf"):
+        code, _, err = cli("run", plant, "--sim", "--duration", bad)
+        assert code == 2 and "argument --duration: must be a positive number" in err, (bad, err)
 
 
 @pytest.mark.parametrize("loop", ["asyncio", "uvloop"])
@@ -289,7 +296,7 @@ def test_default_plant_runs_600_simulated_seconds(tmp_path: Path) -> None:
     output = "\n".join(process.lines)
     print(f"softplc run --sim --duration 600 (default plant, --no-servers): {wall:.1f} s wall time")
     assert code == 0, output
-    assert "stopped: duration of 600 s reached — runtime clock 600.0 s" in output
+    assert "stopped: duration of 600 s reached — scanned 600.0 s of simulated time" in output
     config = load_config(REPO / "tagdb.yaml")
     for task in config.tasks:
         cycles = round(600 / task.interval)
@@ -319,3 +326,28 @@ def test_rt_priority_runs_or_says_why_not(tmp_path: Path, plant: Path) -> None:
     else:
         assert result.returncode == 0, result.stderr
         assert "stopped: duration of 0.3 s reached" in result.stderr
+
+
+def test_a_simulated_run_neither_restores_nor_saves_retained_values(cli, tmp_path: Path) -> None:
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(PLANT.replace("scans: {type: uint32}", "scans: {type: uint32, retain: true}"))
+    state = tmp_path / "state"
+    for _ in range(2):  # the same result both times: the first run left nothing behind
+        code, _, err = cli("run", plant, "--sim", "--until", "l1_scans >= 50", "--no-status", "--state-dir", state)
+        assert code == 0, err
+        assert "condition met: l1_scans >= 50 — scanned 0.5 s of simulated time" in err
+    assert not (state / "retain.sqlite").exists()
+    code, _, err = cli("run", plant, "--duration", "0.3", "--no-status", "--state-dir", state)  # real time: retained
+    assert code == 0, err
+    assert (state / "retain.sqlite").exists()
+
+
+def test_where_it_serves_is_printed_even_when_the_run_is_over_at_once(cli, plant: Path, tmp_path: Path) -> None:
+    code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path,
+                       "--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/", "--modbus-port", "0")
+    assert code == 0, err
+    lines = err.splitlines()
+    assert any(line.startswith("serving: OPC UA on opc.tcp://127.0.0.1:") for line in lines), err
+    assert any(line.startswith("serving: Modbus TCP on 127.0.0.1:") for line in lines), err
+    assert "press Ctrl-C to stop" in lines, err
+    assert lines.index("press Ctrl-C to stop") < next(i for i, line in enumerate(lines) if line.startswith("stopped:"))

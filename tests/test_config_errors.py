@@ -122,3 +122,55 @@ def test_real_command_line_exits_2_without_traceback() -> None:
         assert len(printed) == len(expectations(path))
         for line, (row, column, _) in zip(printed, expectations(path)):
             assert line.startswith(f"{path}:{row}:{column}: ")
+
+
+def test_a_program_that_raises_when_created_is_a_located_problem(cli, tmp_path: Path) -> None:
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(
+        "version: 1\n"
+        "tasks:\n"
+        "  fast:\n"
+        "    interval: 10ms\n"
+        "    programs:\n"
+        "      - name: mixer\n"
+        f"        program: {BAD.parent / 'sample_programs.py'}:BrokenOnCreation\n"
+    )
+    for command in (["check", str(plant)], ["run", str(plant), "--sim", "--duration", "1", "--no-status", "--state-dir", str(tmp_path)]):
+        code, out, err = cli(*command)
+        assert code == 2, (command, err)
+        assert "Traceback" not in err + out
+        assert err.splitlines()[0] == (
+            f"{plant}:7:18: program 'mixer' ({BAD.parent / 'sample_programs.py'}:BrokenOnCreation) cannot be created: "
+            "ValueError: calibration table missing"
+        )
+
+
+def test_check_reports_the_problems_of_every_adapter_section_at_once(cli, tmp_path: Path) -> None:
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(
+        "version: 1\n"
+        "tags:\n"
+        "  a: {type: float32, modbus: {address: 0}}\n"
+        "  b: {type: float32, modbus: {address: 1}}\n"
+        "servers:\n"
+        "  opcua: {endpoint: 'http://wrong/'}\n"
+        f"  modbus: {{host: 'not a host'}}\n"
+        "fleet:\n"
+        f"  robots: nowhere/robots.yaml\n"
+        f"  map: {REPO / 'robots' / 'maps' / 'factory.yaml'}\n"
+    )
+    code, _, err = cli("check", str(plant))
+    assert code == 2, err
+    assert sorted(err.splitlines()[:-1]) == sorted([
+        f"{plant}:4:40: 'b' (holding registers 1..2) overlaps 'a' (holding registers 0..1, pinned, {plant}:3:40)",
+        f"{plant}:6:21: endpoint must look like opc.tcp://HOST:PORT/PATH, not 'http://wrong/'",
+        f"{plant}:7:18: bad host 'not a host': write an IP address (127.0.0.1, 0.0.0.0, ::1) or a host name",
+        f"{plant}:9:11: robots file not found: {tmp_path / 'nowhere' / 'robots.yaml'}",
+    ])
+
+
+def test_pinned_modbus_addresses_are_checked_while_the_server_is_off(cli, tmp_path: Path) -> None:
+    plant = tmp_path / "plant.yaml"
+    plant.write_text("version: 1\ntags:\n  a: {type: float32, modbus: {address: 0}}\n  b: {type: float32, modbus: {address: 1}}\n")
+    code, _, err = cli("check", str(plant))
+    assert code == 2 and "'b' (holding registers 1..2) overlaps 'a'" in err, err

@@ -53,10 +53,19 @@ class FleetSettings:
                 raise ConfigError([where] if where else [])
             return seconds
 
+        files = {key: base / str(section.get(key, default)) for key, default in (("robots", DEFAULT_ROBOTS), ("tasks", DEFAULT_TASKS), ("map", DEFAULT_MAP))}
+        missing = [
+            source.problem(("fleet", key) if key in section else ("fleet",), f"{key} file not found: {file}", at_key=key not in section)
+            for key, file in files.items()
+            # The adapter reads robots and map; the tasks file is for compatibility and dispatchers.
+            if not file.is_file() and source is not None and (key != "tasks" or key in section)
+        ]
+        if missing:
+            raise ConfigError(missing)
         return cls(
-            robots=base / section.get("robots", DEFAULT_ROBOTS),
-            tasks=base / section.get("tasks", DEFAULT_TASKS),
-            map=base / section.get("map", DEFAULT_MAP),
+            robots=files["robots"],
+            tasks=files["tasks"],
+            map=files["map"],
             enabled=bool(section.get("enabled", True)),
             template=section.get("template", "robot"),
             cycle=duration("cycle", 0.1),

@@ -62,11 +62,14 @@ class ModbusAdapter:
 
     def __init__(self, config: PlantConfig, settings: ModbusSettings | None = None) -> None:
         problems = settings_problems(config)
-        if problems:
-            raise ConfigError(problems)
         self.settings = settings or ModbusSettings.from_servers(config.servers)
         # Built now so a bad map is a configuration error before anything starts.
-        self.map: AddressMap = build_address_map(config, self.settings)
+        try:
+            self.map: AddressMap = build_address_map(config, self.settings)
+        except ConfigError as error:
+            problems.extend(error.problems)
+        if problems:
+            raise ConfigError(problems)
         self._plant_name = config.name
         self.port: int | None = None
         self._server: PlcTcpServer | None = None

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import ipaddress
+import re
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -75,18 +77,43 @@ class ModbusSettings:
 
 
 def settings_problems(config: PlantConfig) -> list[Problem]:
-    """Located mistakes in `servers.modbus` that the schema cannot see (a duration's text)."""
+    """Located mistakes in `servers.modbus` that the schema cannot see (a duration's text, a host's form)."""
     section = config.servers.get("modbus")
-    if not isinstance(section, dict) or "idle_timeout" not in section:
-        return []
-    value = section["idle_timeout"]
-    if _seconds(value) is not None:
+    if not isinstance(section, dict):
         return []
     from softplc.yamlsource import Location, Problem
 
-    message = f"bad idle_timeout {value!r}: write a duration such as 60s or 5min, or 0 to never close idle connections"
-    path = ("servers", "modbus", "idle_timeout")
-    return [config.source.problem(path, message) if config.source else Problem(Location(str(config.path), 1, 1), message)]
+    found: list[tuple[str, str]] = []
+    if "idle_timeout" in section and _seconds(section["idle_timeout"]) is None:
+        value = section["idle_timeout"]
+        found.append(("idle_timeout", f"bad idle_timeout {value!r}: write a duration such as 60s or 5min, or 0 to never close idle connections"))
+    if isinstance(section.get("host"), str) and not is_host(section["host"]):
+        found.append(("host", f"bad host {section['host']!r}: write an IP address (127.0.0.1, 0.0.0.0, ::1) or a host name"))
+    return [
+        config.source.problem(("servers", "modbus", key), message) if config.source else Problem(Location(str(config.path), 1, 1), message)
+        for key, message in found
+    ]
+
+
+_HOST_LABEL = re.compile(r"^[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?$")
+
+
+def is_host(text: str) -> bool:
+    """An IP address or a syntactically valid host name (RFC 1123); nothing is looked up."""
+    try:
+        ipaddress.ip_address(text)
+        return True
+    except ValueError:
+        pass
+    labels = text.removesuffix(".").split(".")
+    return 0 < len(text) <= 253 and all(_HOST_LABEL.match(label) for label in labels)
+
+
+def host_name(text: str) -> str:
+    """argparse type for --modbus-host."""
+    if not is_host(text):
+        raise argparse.ArgumentTypeError(f"not an IP address or host name: {text!r}")
+    return text
 
 
 def _seconds(value: Any) -> float | None:

@@ -49,3 +49,13 @@ class Filler(Program):
 
 
 NOT_A_PROGRAM = 42
+
+
+class BrokenOnCreation(Program):
+    """A program whose constructor raises (a bug in user code): reported where it is named."""
+
+    def __init__(self, context: object) -> None:
+        raise ValueError("calibration table missing")
+
+    def scan(self) -> None:
+        pass
