@@ -309,7 +309,8 @@ class _Checker:
             prefix = template.get("prefix", name[:1])
             width = max(2, len(str(count)))
             return [f"{prefix}{index:0{width}d}" for index in range(1, count + 1)]
-        if explicit is None and count is None:
+        mistyped = any(path[: len(base)] == base for path in self.schema_paths)  # e.g. 'instance:', already reported
+        if explicit is None and count is None and not mistyped:
             self.problem(base, f"template '{name}' needs 'instances' (a list of names) or 'count'", at_key=True)
         return []
 
@@ -599,7 +600,11 @@ class _Checker:
                 tag = _substitute(tag, substitution)
                 if tag not in self.tags:
                     where = var_path if isinstance(target, str) else (*var_path, index)
-                    self.problem(where, f"'{var}' of program '{name}' is bound to a missing tag '{tag}'{did_you_mean(tag, self.tags)}")
+                    if tag.startswith(SYSTEM_PREFIX):
+                        self.problem(where, f"'{var}' of program '{name}' is bound to the system tag '{tag}': programs bind plant tags only "
+                                     "(system tags are read by clients, --until and the HMI)")
+                    else:
+                        self.problem(where, f"'{var}' of program '{name}' is bound to a missing tag '{tag}'{did_you_mean(tag, self.tags)}")
                     ok = False
                 resolved.append(tag)
             bindings[var] = resolved[0] if isinstance(target, str) else resolved
