@@ -155,6 +155,9 @@ OPCUA_SERVER: dict[str, Any] = {
         "certificate": {"type": "string", "description": "Use this server certificate (DER or PEM) instead of generating one; needs private_key."},
         "private_key": {"type": "string", "description": "Private key (PEM) of `certificate`."},
         "folder_size": {"type": "integer", "minimum": 10, "maximum": 10000, "description": "Most children per folder before it is split (default 100)."},
+        "max_message_size": {"type": "integer", "minimum": 65536, "maximum": 268435456, "description": "Largest request in bytes, all chunks together (default 4194304); 64 KB before a session is activated."},
+        "max_chunk_count": {"type": "integer", "minimum": 1, "maximum": 8192, "description": "Most chunks of one request (default 512)."},
+        "max_connections_per_peer": {"type": "integer", "minimum": 1, "maximum": 1000, "description": "Most simultaneous connections from one IP address; more are refused (default 50)."},
     },
     "additionalProperties": False,
 }

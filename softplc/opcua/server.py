@@ -37,7 +37,7 @@ from softplc.opcua.roles import RolePermissions
 from softplc.opcua.scheduling import ScanGuard
 from softplc.opcua.security import ClientCertificateValidator, Pki, SecuredChannels
 from softplc.opcua.settings import POLICIES, POLICY_NONE, POLICY_TEXT, OpcUaSettings
-from softplc.opcua.transport import GuardedServer
+from softplc.opcua.transport import ConnectionLimits, GuardedServer
 from softplc.opcua.users import SoftplcUserManager, UserStore
 from softplc.opcua.writes import MAX_NODES_PER_READ, MAX_NODES_PER_WRITE, TagAttributeService
 from softplc.yamlsource import ConfigError
@@ -92,6 +92,11 @@ class OpcUaServer:
             secured=self._secured_channels,
             offer_none=POLICY_NONE in settings.policies,
             guard=self.guard,
+            connection_limits=ConnectionLimits(
+                max_message_size=settings.max_message_size,
+                max_chunk_count=settings.max_chunk_count,
+                max_connections_per_peer=settings.max_connections_per_peer,
+            ),
         )
         self.server = server
         server.name = f"softplc {runtime.config.name}"

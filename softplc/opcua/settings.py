@@ -22,6 +22,12 @@ DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/softplc/"
 DEFAULT_NAMESPACE = "urn:softplc:tags"
 DEFAULT_APPLICATION_URI = "urn:softplc:server"
 DEFAULT_FOLDER_SIZE = 100
+# Transport limits (asyncua's defaults are 100 MB messages of up to 1601 chunks, which an
+# unauthenticated peer may send). 4 MB holds the biggest Read/Write we serve many times over;
+# 512 chunks let a client with the smallest buffer the spec allows (8 KB) send a full message.
+DEFAULT_MAX_MESSAGE_SIZE = 4 * 1024 * 1024
+DEFAULT_MAX_CHUNK_COUNT = 512
+DEFAULT_MAX_CONNECTIONS_PER_PEER = 50
 
 POLICY_NONE = "None"
 POLICY_SIGN = "Basic256Sha256_Sign"
@@ -56,6 +62,9 @@ class OpcUaSettings:
     certificate: Path | None = None  # an existing server certificate (with private_key)
     private_key: Path | None = None
     folder_size: int = DEFAULT_FOLDER_SIZE
+    max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE  # bytes of one request, all chunks
+    max_chunk_count: int = DEFAULT_MAX_CHUNK_COUNT
+    max_connections_per_peer: int = DEFAULT_MAX_CONNECTIONS_PER_PEER  # per client IP address
     enabled: bool = True
 
     def __post_init__(self) -> None:
@@ -71,6 +80,12 @@ class OpcUaSettings:
             raise SettingsError("certificate", "give both certificate and private_key, or neither")
         if not 10 <= self.folder_size <= 10_000:
             raise SettingsError("folder_size", "folder_size must be between 10 and 10000")
+        if not 65_536 <= self.max_message_size <= 256 * 1024 * 1024:
+            raise SettingsError("max_message_size", "max_message_size must be between 65536 and 268435456 bytes")
+        if not 1 <= self.max_chunk_count <= 8192:
+            raise SettingsError("max_chunk_count", "max_chunk_count must be between 1 and 8192")
+        if not 1 <= self.max_connections_per_peer <= 1000:
+            raise SettingsError("max_connections_per_peer", "max_connections_per_peer must be between 1 and 1000")
 
     @classmethod
     def from_section(cls, section: dict[str, Any] | None, base_dir: Path) -> OpcUaSettings:
@@ -93,6 +108,9 @@ class OpcUaSettings:
             certificate=path("certificate"),
             private_key=path("private_key"),
             folder_size=int(section.get("folder_size", DEFAULT_FOLDER_SIZE)),
+            max_message_size=int(section.get("max_message_size", DEFAULT_MAX_MESSAGE_SIZE)),
+            max_chunk_count=int(section.get("max_chunk_count", DEFAULT_MAX_CHUNK_COUNT)),
+            max_connections_per_peer=int(section.get("max_connections_per_peer", DEFAULT_MAX_CONNECTIONS_PER_PEER)),
             enabled=bool(section.get("enabled", True)),
         )
 
