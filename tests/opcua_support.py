@@ -20,6 +20,7 @@ from softplc.opcua.client import ClientCertificate, ensure_client_certificate, p
 from softplc.runtime import Runtime
 
 PASSWORDS = {"viewer": "viewer-pass-1", "operator": "operator-pass-1", "engineer": "engineer-pass-1"}
+TEST_HASH_COST = 10  # log2 N of the tests' password hashes: milliseconds, not the default's ~0.4 s
 
 PLANT = """
 version: 1
@@ -76,7 +77,7 @@ def write_config(directory: Path, text: str = PLANT) -> Path:
 def add_users(state_dir: Path) -> UserStore:
     store = UserStore(state_dir / "users.yaml")
     for role in Role:
-        store.add(role.value, role, PASSWORDS[role.value])
+        store.add(role.value, role, PASSWORDS[role.value], log2_n=TEST_HASH_COST)
     return store
 
 

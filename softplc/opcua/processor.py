@@ -6,6 +6,9 @@
   opens a secured channel); any other request on it gets BadSecurityPolicyRejected.
 - RegisterServer needs no session in asyncua: anyone could add entries to FindServers. We are
   not a discovery server, so it is refused (BadServiceUnsupported).
+- asyncua checks a password synchronously on the event loop. A UserName login is decided here
+  first, off the loop and throttled (logins.py); a refused one is answered here
+  (BadUserAccessDenied), without asyncua's error line.
 """
 
 from __future__ import annotations
@@ -13,9 +16,12 @@ from __future__ import annotations
 from typing import Any
 
 from asyncua import ua
-from asyncua.common.utils import ServiceError
+from asyncua.common.utils import Buffer, ServiceError
 from asyncua.crypto.security_policies import SecurityPolicyNone
 from asyncua.server.uaprocessor import UaProcessor
+from asyncua.ua.ua_binary import struct_from_binary
+
+from softplc.opcua.peers import peer_host
 
 
 class PolicyRefused(Exception):
@@ -52,10 +58,12 @@ class DiscoveryOnlyNone:
         return DiscoveryOnlyPolicy(peer_certificate)
 
 
+_ACTIVATE_SESSION = ua.NodeId(ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary)
 
 
 class GuardedProcessor(UaProcessor):
-    """asyncua's message processor, with the discovery-only None channel and clean policy refusals."""
+    """asyncua's message processor, with the discovery-only None channel, clean policy refusals
+    and password logins decided off the event loop."""
 
     def open_secure_channel(self, algohdr: Any, seqhdr: Any, body: Any) -> None:
         try:
@@ -68,4 +76,29 @@ class GuardedProcessor(UaProcessor):
             raise ServiceError(ua.StatusCodes.BadSecurityPolicyRejected)
         if typeid in _REGISTRATION:  # we are no discovery server; asyncua would accept them without a session
             raise ServiceError(ua.StatusCodes.BadServiceUnsupported)
+        if typeid == _ACTIVATE_SESSION and not await self._password_accepted(requesthdr, body):
+            # Answered here: asyncua would log an error line with each refused login.
+            response = ua.ServiceFault()
+            response.ResponseHeader.ServiceResult = ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
+            self.send_response(requesthdr.RequestHandle, seqhdr, response)
+            return True
         return await super()._process_message(typeid, requesthdr, seqhdr, body)
+
+    async def _password_accepted(self, requesthdr: Any, body: Buffer) -> bool:
+        """Decide a UserName login before asyncua's synchronous ActivateSession asks the user
+        manager, which then finds the success remembered. False: refuse the request. Anything
+        that is not a password login (or that asyncua refuses anyway) passes through."""
+        check = getattr(self.iserver.user_manager, "check_password", None)
+        session = self.session or self.iserver.lookup_external_session(requesthdr.AuthenticationToken)
+        if check is None or session is None:
+            return True
+        try:
+            params = struct_from_binary(ua.ActivateSessionParameters, body.copy())  # asyncua decodes its own
+            token = params.UserIdentityToken
+            if not isinstance(token, ua.UserNameIdentityToken) or not token.UserName:
+                return True
+            name, password = self.iserver.decrypt_user_token(session, token)
+        except Exception:  # noqa: BLE001
+            return True  # asyncua fails the same way: BadIdentityTokenInvalid, or a decoding error
+        return bool(await check(peer_host(self.name), name, password or ""))
+

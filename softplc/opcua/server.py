@@ -64,6 +64,7 @@ class OpcUaServer:
         self.pki: Pki | None = None
         self.publisher: Publisher | None = None
         self.writes: TagAttributeService | None = None
+        self.user_manager: SoftplcUserManager | None = None
 
     @property
     def namespace_uri(self) -> str:
@@ -87,8 +88,9 @@ class OpcUaServer:
         self.pki = Pki(settings.pki_path(runtime.state_dir))
         self._secured_channels = SecuredChannels()
         self.guard = ScanGuard.for_runtime(runtime)
+        self.user_manager = SoftplcUserManager(self.users, settings.anonymous_role)
         server = GuardedServer(
-            user_manager=SoftplcUserManager(self.users, settings.anonymous_role),
+            user_manager=self.user_manager,
             secured=self._secured_channels,
             offer_none=POLICY_NONE in settings.policies,
             guard=self.guard,
@@ -161,6 +163,8 @@ class OpcUaServer:
         if self.server is not None:
             await _quiet_stop(self.server)
             self.server = None
+            if self.user_manager is not None:
+                self.user_manager.close()
             # Let the collector have the stopped server's nodes back (a pause no longer matters).
             gc.unfreeze()
 

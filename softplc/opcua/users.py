@@ -3,29 +3,18 @@
 File format (written by `softplc users add/remove`; default `<state_dir>/users.yaml`):
 
     users:
-      alice:  {role: operator, password: "scrypt$11$8$1$<salt>$<hash>"}
+      alice:  {role: operator, password: "scrypt$17$8$1$<salt>$<hash>"}
       robot7: {role: operator, certificate: "<SHA-256 fingerprint of its client certificate>"}
 
-Passwords are stored as scrypt hashes with a random 16-byte salt; the parameters are in the
-string, so they can change without breaking old entries. asyncua checks a login synchronously
-inside the event loop that also runs the scan, so the cost is kept at a few milliseconds
-(scrypt N=2^11, r=8), successful logins are remembered for the process's lifetime (keyed by
-an HMAC under a random per-process key, never the password), and password checks are
-throttled: after 5 failed logins within a second, further unremembered logins are refused
-without hashing until the second has passed.
+Passwords are stored as scrypt hashes (passwords.py); they are checked off the event loop,
+throttled and remembered by logins.py, before asyncua asks `SoftplcUserManager.get_user`.
 """
 
 from __future__ import annotations
 
-import base64
-import hashlib
-import hmac
 import logging
 import os
 import re
-import secrets
-import time
-from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,48 +23,19 @@ import yaml
 from asyncua.crypto.permission_rules import UserRole
 from asyncua.server.user_managers import UserManager
 
+from softplc.opcua.logins import PasswordLogins
+from softplc.opcua.passwords import SCRYPT_LOG2_N, hash_password, verify_password
 from softplc.opcua.roles import ROLE_NAMES, Role, SessionUser
 from softplc.opcua.security import fingerprint, normalise_fingerprint
 from softplc.yamlsource import ConfigError, load_yaml
 
 log = logging.getLogger(__name__)
 
+__all__ = ["SoftplcUserManager", "UserEntry", "UserStore", "hash_password", "verify_password"]
+
 USER_NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.@-]{1,64}$")
 MIN_PASSWORD_LENGTH = 8
-SCRYPT_LOG2_N, SCRYPT_R, SCRYPT_P = 11, 8, 1
-FAILURES_PER_SECOND = 5
 HEADER = "# softplc OPC UA users. Manage with: softplc users add NAME --role ROLE | softplc users list | softplc users remove NAME\n"
-
-
-def hash_password(password: str) -> str:
-    """A salted scrypt hash string for `password`."""
-    salt = os.urandom(16)
-    digest = _scrypt(password, salt, SCRYPT_LOG2_N, SCRYPT_R, SCRYPT_P)
-    return f"scrypt${SCRYPT_LOG2_N}${SCRYPT_R}${SCRYPT_P}${_b64(salt)}${_b64(digest)}"
-
-
-def verify_password(password: str, stored: str) -> bool:
-    """Whether `password` matches a hash string made by `hash_password`."""
-    try:
-        scheme, log2_n, r, p, salt, digest = stored.split("$")
-        if scheme != "scrypt":
-            return False
-        expected = base64.b64decode(digest)
-        actual = _scrypt(password, base64.b64decode(salt), int(log2_n), int(r), int(p))
-    except (ValueError, TypeError):
-        return False
-    return hmac.compare_digest(actual, expected)
-
-
-def _scrypt(password: str, salt: bytes, log2_n: int, r: int, p: int) -> bytes:
-    return hashlib.scrypt(password.encode("utf-8"), salt=salt, n=2**log2_n, r=r, p=p, maxmem=256 * 1024 * 1024, dklen=32)
-
-
-def _b64(data: bytes) -> str:
-    return base64.b64encode(data).decode("ascii")
-
-
-_DUMMY_HASH = hash_password(secrets.token_hex(8))  # checked for unknown names, so timing tells nothing
 
 
 @dataclass(frozen=True)
@@ -141,8 +101,13 @@ class UserStore:
 
     # -- editing (CLI) ------------------------------------------------------------------
 
-    def add(self, name: str, role: Role, password: str | None = None, certificate: str | None = None) -> UserEntry:
-        """Add or replace a user; needs a password or a certificate fingerprint."""
+    def add(self, name: str, role: Role, password: str | None = None, certificate: str | None = None,
+            *, log2_n: int = SCRYPT_LOG2_N) -> UserEntry:
+        """Add or replace a user; needs a password or a certificate fingerprint.
+
+        `log2_n` is the password hash's cost (scrypt N = 2**log2_n); lower it only for tests and
+        embedded use, where logging in must be fast and the users file is not exposed.
+        """
         if not USER_NAME_PATTERN.match(name):
             raise ValueError(f"invalid user name '{name}': use 1-64 letters, digits and _ . @ -")
         if password is None and certificate is None:
@@ -152,7 +117,7 @@ class UserStore:
         print_ = normalise_fingerprint(certificate) if certificate else None
         if print_ is not None and len(print_) != 64:
             raise ValueError("the certificate fingerprint must be the full SHA-256 (64 hex digits)")
-        entry = UserEntry(name, role, hash_password(password) if password is not None else None, print_)
+        entry = UserEntry(name, role, hash_password(password, log2_n) if password is not None else None, print_)
         self._users[name] = entry
         self.save()
         return entry
@@ -218,21 +183,29 @@ class SoftplcUserManager(UserManager):
     """asyncua user manager: users file logins, certificate logins, optional anonymous viewer.
 
     Never grants asyncua's Admin role, so AccessLevel and node management rules always apply.
+    A password login must have been decided by `check_password` (awaited by the transport
+    before asyncua activates the session); `get_user` never hashes on the event loop.
     """
 
     def __init__(self, store: UserStore, anonymous: Role | None) -> None:
         self.store = store
         self.anonymous = anonymous
-        self._key = secrets.token_bytes(32)
-        self._remembered: dict[bytes, tuple[str, str | None]] = {}  # HMAC → (name, hash it matched)
-        self._failures: deque[float] = deque()
+        self.logins = PasswordLogins(store)
+
+    async def check_password(self, peer: str, username: str, password: str) -> bool:
+        """Decide a password login from address `peer` off the event loop (throttled)."""
+        return await self.logins.check(peer, username, password)
 
     def get_user(
         self, iserver: Any, username: str | None = None, password: str | None = None, certificate: Any = None
     ) -> SessionUser | None:
         self.store.refresh()
         if username:
-            return self._password_login(username, password or "")
+            entry = self.logins.decided(username, password or "")
+            if entry is None:
+                log.warning("OPC UA: login of %r refused: its password was not checked ahead", username)
+                return None
+            return SessionUser(role=UserRole.User, name=entry.name, access=entry.role)
         if certificate:
             # A certificate here was proven: either an X509 identity token's signature was
             # checked, or it is the certificate of the secured channel the session runs on.
@@ -243,25 +216,5 @@ class SoftplcUserManager(UserManager):
             return SessionUser(role=UserRole.User, name="anonymous", access=self.anonymous)
         return None
 
-    def _password_login(self, username: str, password: str) -> SessionUser | None:
-        entry = self.store.get(username)
-        token = hmac.new(self._key, f"{username}\0{password}".encode(), hashlib.sha256).digest()
-        remembered = self._remembered.get(token)
-        if remembered is not None and entry is not None and remembered == (entry.name, entry.password_hash):
-            return SessionUser(role=UserRole.User, name=entry.name, access=entry.role)
-        now = time.monotonic()
-        while self._failures and now - self._failures[0] > 1.0:
-            self._failures.popleft()
-        if len(self._failures) >= FAILURES_PER_SECOND:
-            log.warning("login of '%s' refused without checking: too many failed logins in the last second", username)
-            return None
-        stored = entry.password_hash if entry is not None and entry.password_hash else _DUMMY_HASH
-        if verify_password(password, stored) and entry is not None and entry.password_hash:
-            if len(self._remembered) > 1000:
-                self._remembered.clear()
-            self._remembered[token] = (entry.name, entry.password_hash)
-            log.info("user '%s' logged in (%s)", entry.name, entry.role.value)
-            return SessionUser(role=UserRole.User, name=entry.name, access=entry.role)
-        self._failures.append(now)
-        log.warning("failed OPC UA login for user '%s'", username)
-        return None
+    def close(self) -> None:
+        self.logins.close()

@@ -1,0 +1,134 @@
+"""Password logins: a flood of wrong passwords for one user locks nobody else out, fills no log,
+and the password hash never runs on the event loop that runs the scan."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+
+import pytest
+import pytest_asyncio
+from asyncua import ua
+
+from softplc.opcua import Role
+from softplc.opcua import logins as logins_module
+from softplc.opcua.logins import FAILURES_PER_PEER, FAILURES_PER_PEER_AND_USER, LoginThrottle
+from softplc.opcua.passwords import SCRYPT_LOG2_N, verify_password
+from tests.opcua_support import TEST_HASH_COST, client_for, running_plant
+
+in_module_loop = pytest.mark.asyncio(loop_scope="module")
+
+
+@pytest_asyncio.fixture(scope="module", loop_scope="module")
+async def plant(tmp_path_factory: pytest.TempPathFactory):
+    async with running_plant(tmp_path_factory.mktemp("opcua-logins"), security=("None",)) as (runtime, server):
+        yield runtime, server
+
+
+async def _log_in(server, user: str, password: str, timeout: float = 4) -> ua.StatusCode:
+    """Good, or the status the server refused the login with."""
+    try:
+        async with client_for(server, user, password, timeout=timeout):
+            return ua.StatusCode()
+    except ua.UaStatusCodeError as refused:
+        return ua.StatusCode(refused.code)
+
+
+@in_module_loop
+async def test_a_password_flood_on_one_user_locks_out_nobody_else(plant, caplog: pytest.LogCaptureFixture) -> None:
+    _, server = plant
+    caplog.set_level(logging.INFO)
+    server.users.add("alice", Role.OPERATOR, "alice-password-1", log2_n=TEST_HASH_COST)
+    server.users.add("bob", Role.OPERATOR, "bob-password-1", log2_n=TEST_HASH_COST)
+    logins = server.user_manager.logins
+    hashed = logins.hashed
+    stop = asyncio.Event()
+
+    async def guess(attacker: int) -> list[ua.StatusCode]:
+        answers = []
+        for attempt in range(15):
+            if stop.is_set():
+                break
+            answers.append(await _log_in(server, "alice", f"guess-{attacker}-{attempt}"))
+        return answers
+
+    attackers = [asyncio.create_task(guess(number)) for number in range(3)]
+    while logins.hashed < hashed + FAILURES_PER_PEER_AND_USER:  # until alice's budget from 127.0.0.1 is spent
+        await asyncio.sleep(0.01)
+    # bob has never logged in (nothing remembered): his password is checked during the flood.
+    bob = await _log_in(server, "bob", "bob-password-1")
+    stop.set()
+    answers = [answer for attacker in attackers for answer in await attacker]
+    assert bob.is_good()
+    assert answers and all(answer.value == ua.StatusCodes.BadUserAccessDenied for answer in answers)
+    assert logins.hashed - hashed == FAILURES_PER_PEER_AND_USER + 1  # the rest were refused without hashing
+    # A few log lines, not one per attempt, and no asyncua error line per refused login.
+    ours = [r for r in caplog.records if r.name.startswith("softplc.opcua") and r.levelno >= logging.WARNING and "login" in r.getMessage()]
+    assert 1 <= len(ours) <= 2, [r.getMessage() for r in ours]
+    assert not [r for r in caplog.records if r.name.startswith("asyncua") and r.levelno >= logging.ERROR]
+
+
+@in_module_loop
+async def test_the_event_loop_keeps_running_while_a_password_is_hashed(plant, monkeypatch: pytest.MonkeyPatch) -> None:
+    runtime, server = plant
+    entry = server.users.add("carol", Role.VIEWER, "carol-password-1")  # the default cost: ~0.4 s a check
+    assert entry.password_hash is not None and entry.password_hash.startswith(f"scrypt${SCRYPT_LOG2_N}$8$1$")
+    hashing: list[tuple[float, float]] = []
+
+    def timed_verify(password: str, stored: str) -> bool:
+        started = time.perf_counter()
+        try:
+            return verify_password(password, stored)
+        finally:
+            hashing.append((started, time.perf_counter()))
+
+    monkeypatch.setattr(logins_module, "verify_password", timed_verify)
+    ticks: list[float] = []
+
+    async def ticker() -> None:
+        while True:
+            await asyncio.sleep(0.001)
+            ticks.append(time.perf_counter())
+
+    ticking = asyncio.create_task(ticker())
+    cycles = runtime.tasks[0].stats.cycles
+    try:
+        assert (await _log_in(server, "carol", "carol-password-1", timeout=30)).is_good()
+    finally:
+        ticking.cancel()
+    assert len(hashing) == 1  # the login was checked just now
+    started, ended = hashing[0]
+    # Had the hash run on the loop, the ticker could not have ticked while it ran.
+    assert sum(1 for tick in ticks if started < tick < ended) >= 10, (ended - started, len(ticks))
+    assert runtime.tasks[0].stats.cycles > cycles
+    # Remembered: the next login of carol costs no hash.
+    assert (await _log_in(server, "carol", "carol-password-1")).is_good()
+    assert len(hashing) == 1
+
+
+def test_throttle_counts_per_peer_and_user_per_peer_and_per_user() -> None:
+    now = [0.0]
+    throttle = LoginThrottle(window=60, clock=lambda: now[0])
+
+    def fail(peer: str, user: str) -> None:
+        throttle.started(peer, user)
+        throttle.finished(peer, user, failed=True)
+
+    for _ in range(FAILURES_PER_PEER_AND_USER):
+        assert throttle.refusal("10.0.0.1", "alice") is None
+        fail("10.0.0.1", "alice")
+    assert throttle.refusal("10.0.0.1", "alice") is not None
+    assert throttle.refusal("10.0.0.1", "bob") is None  # another user from the same address
+    assert throttle.refusal("10.0.0.2", "alice") is None  # the same user from another address
+    throttle.started("10.0.0.3", "dave")  # a check under way counts as a failure until it ends
+    for _ in range(FAILURES_PER_PEER_AND_USER - 1):
+        fail("10.0.0.3", "dave")
+    assert throttle.refusal("10.0.0.3", "dave") is not None
+    throttle.finished("10.0.0.3", "dave", failed=False)
+    assert throttle.refusal("10.0.0.3", "dave") is None
+    for number in range(FAILURES_PER_PEER):  # spraying user names from one address
+        fail("10.0.0.4", f"user{number}")
+    assert throttle.refusal("10.0.0.4", "bob") is not None and throttle.refusal("10.0.0.5", "bob") is None
+    now[0] = 61.0  # the window has passed
+    assert throttle.refusal("10.0.0.1", "alice") is None and throttle.refusal("10.0.0.4", "bob") is None
