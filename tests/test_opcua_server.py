@@ -271,3 +271,35 @@ async def test_operation_limits_are_advertised_and_enforced(plant, operator) -> 
     with pytest.raises(ua.UaStatusCodeError) as refused:
         await operator.write_values([node] * (per_write + 1), [ua.Variant(1, ua.VariantType.Int32)] * (per_write + 1))
     assert refused.value.code == ua.StatusCodes.BadTooManyOperations
+
+
+async def test_browse_honours_max_references_with_continuation_points(plant, operator) -> None:
+    ns = await _ns(operator)
+    folder = ua.NodeId("/Plant", ns)
+
+    def description() -> ua.BrowseDescription:
+        return ua.BrowseDescription(NodeId=folder, BrowseDirection=ua.BrowseDirection.Forward,
+                                    ReferenceTypeId=ua.NodeId(ua.ObjectIds.HierarchicalReferences), IncludeSubtypes=True,
+                                    ResultMask=ua.BrowseResultMask.All)
+
+    everything = (await operator.uaclient.browse(ua.BrowseParameters(NodesToBrowse=[description()])))[0]
+    assert not everything.ContinuationPoint and len(everything.References) > 8
+    first = (await operator.uaclient.browse(ua.BrowseParameters(NodesToBrowse=[description()], RequestedMaxReferencesPerNode=4)))[0]
+    assert len(first.References) == 4 and first.ContinuationPoint
+    pages, point = [first.References], first.ContinuationPoint
+    while point:
+        result = (await operator.uaclient.browse_next(ua.BrowseNextParameters(ReleaseContinuationPoints=False, ContinuationPoints=[point])))[0]
+        assert result.StatusCode.is_good() and 0 < len(result.References) <= 4
+        pages.append(result.References)
+        point = result.ContinuationPoint
+    assert [ref.NodeId for page in pages for ref in page] == [ref.NodeId for ref in everything.References]
+    # A released point, or one never given out, is invalid afterwards.
+    held = (await operator.uaclient.browse(ua.BrowseParameters(NodesToBrowse=[description()], RequestedMaxReferencesPerNode=2)))[0]
+    released = await operator.uaclient.browse_next(ua.BrowseNextParameters(ReleaseContinuationPoints=True, ContinuationPoints=[held.ContinuationPoint]))
+    assert released[0].StatusCode.is_good() and not released[0].References
+    for point in (held.ContinuationPoint, b"made-up"):
+        again = await operator.uaclient.browse_next(ua.BrowseNextParameters(ReleaseContinuationPoints=False, ContinuationPoints=[point]))
+        assert again[0].StatusCode.value == ua.StatusCodes.BadContinuationPointInvalid
+    # asyncua's own client follows continuation points by itself.
+    children = await operator.get_node(folder).get_children()
+    assert [child.nodeid for child in children] == [ref.NodeId for ref in everything.References]

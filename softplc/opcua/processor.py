@@ -9,10 +9,13 @@
 - asyncua checks a password synchronously on the event loop. A UserName login is decided here
   first, off the loop and throttled (logins.py); a refused one is answered here
   (BadUserAccessDenied), without asyncua's error line.
+- asyncua ignores RequestedMaxReferencesPerNode and has no BrowseNext: Browse and BrowseNext
+  are served here with continuation points (browsing.py).
 """
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from asyncua import ua
@@ -21,6 +24,7 @@ from asyncua.crypto.security_policies import SecurityPolicyNone
 from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua.ua_binary import struct_from_binary
 
+from softplc.opcua.browsing import ContinuationPoints
 from softplc.opcua.peers import peer_host
 
 
@@ -59,11 +63,16 @@ class DiscoveryOnlyNone:
 
 
 _ACTIVATE_SESSION = ua.NodeId(ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary)
+_BROWSE = ua.NodeId(ua.ObjectIds.BrowseRequest_Encoding_DefaultBinary)
+_BROWSE_NEXT = ua.NodeId(ua.ObjectIds.BrowseNextRequest_Encoding_DefaultBinary)
 
 
 class GuardedProcessor(UaProcessor):
-    """asyncua's message processor, with the discovery-only None channel, clean policy refusals
-    and password logins decided off the event loop."""
+    """asyncua's message processor, with the discovery-only None channel, clean policy refusals,
+    password logins decided off the event loop, and Browse continuation points."""
+
+    _continuation_points: ContinuationPoints | None = None
+    _continuation_session: Any = None
 
     def open_secure_channel(self, algohdr: Any, seqhdr: Any, body: Any) -> None:
         try:
@@ -82,7 +91,35 @@ class GuardedProcessor(UaProcessor):
             response.ResponseHeader.ServiceResult = ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
             self.send_response(requesthdr.RequestHandle, seqhdr, response)
             return True
+        if typeid == _BROWSE or typeid == _BROWSE_NEXT:
+            return await self._browse(typeid, requesthdr, seqhdr, body)
         return await super()._process_message(typeid, requesthdr, seqhdr, body)
+
+    async def _browse(self, typeid: ua.NodeId, requesthdr: Any, seqhdr: Any, body: Buffer) -> bool:
+        """Browse and BrowseNext with continuation points (asyncua ignores RequestedMaxReferencesPerNode)."""
+        # The checks UaProcessor._process_message makes before any session service.
+        session = self.session
+        if session is None:
+            raise ua.uaerrors.BadUserAccessDenied
+        permissions = self._connection.security_policy.permissions
+        if permissions is not None and not permissions.check_validity(session.user, typeid, body):
+            raise ua.uaerrors.BadUserAccessDenied
+        self.session_last_activity = time.monotonic()
+        session.touch()
+        if self._continuation_session is not session:  # points belong to a session
+            self._continuation_points, self._continuation_session = ContinuationPoints(), session
+        points = self._continuation_points
+        assert points is not None
+        if typeid == _BROWSE:
+            params = struct_from_binary(ua.BrowseParameters, body)
+            results = await session.browse(params)
+            points.page(results, params.RequestedMaxReferencesPerNode)
+            self.send_response(requesthdr.RequestHandle, seqhdr, ua.BrowseResponse(Results=results))
+        else:
+            next_params = struct_from_binary(ua.BrowseNextParameters, body)
+            results = points.next(next_params.ContinuationPoints, next_params.ReleaseContinuationPoints)
+            self.send_response(requesthdr.RequestHandle, seqhdr, ua.BrowseNextResponse(Parameters=ua.BrowseNextResult(Results=results)))
+        return True
 
     async def _password_accepted(self, requesthdr: Any, body: Buffer) -> bool:
         """Decide a UserName login before asyncua's synchronous ActivateSession asks the user

@@ -57,7 +57,8 @@ class RolePermissions(PermissionRuleset):
     """
 
     def __init__(self) -> None:
-        self._allowed = {ua.NodeId(type_id) for type_id in USER_TYPES}
+        # asyncua's list lacks BrowseNext, which transport.py serves (Browse continuation points).
+        self._allowed = {ua.NodeId(type_id) for type_id in (*USER_TYPES, ua.ObjectIds.BrowseNextRequest_Encoding_DefaultBinary)}
         self._forbidden = {ua.NodeId(type_id) for type_id in ADMIN_TYPES}
 
     def check_validity(self, user: User, action_type_id: ua.NodeId, body: object) -> bool:

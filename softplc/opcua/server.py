@@ -32,6 +32,7 @@ from asyncua.common.callback import CallbackType
 
 from softplc import __version__
 from softplc.opcua.address_space import AddressSpaceBuilder, plan_folders, tag_node_id
+from softplc.opcua.browsing import MAX_CONTINUATION_POINTS
 from softplc.opcua.publisher import Publisher
 from softplc.opcua.roles import RolePermissions
 from softplc.opcua.scheduling import ScanGuard
@@ -153,6 +154,8 @@ class OpcUaServer:
         for limit, value in ((ua.ObjectIds.Server_ServerCapabilities_OperationLimits_MaxNodesPerRead, MAX_NODES_PER_READ),
                              (ua.ObjectIds.Server_ServerCapabilities_OperationLimits_MaxNodesPerWrite, MAX_NODES_PER_WRITE)):
             await server.get_node(ua.NodeId(limit)).write_value(ua.Variant(value, ua.VariantType.UInt32))
+        await server.get_node(ua.NodeId(ua.ObjectIds.Server_ServerCapabilities_MaxBrowseContinuationPoints)).write_value(
+            ua.Variant(MAX_CONTINUATION_POINTS, ua.VariantType.UInt16))
         self.namespace_index = await server.register_namespace(settings.namespace)
         await self._configure_security(server)
         await self._build_address_space(runtime)
