@@ -129,3 +129,20 @@ async def test_a_none_channel_serves_discovery_only_when_none_is_not_offered(sec
     finally:
         client.disconnect_socket()
 
+
+
+async def test_an_untrusted_channel_certificate_gets_no_session_even_if_create_session_omits_it(secure) -> None:
+    directory, _, server = secure
+    certificate = make_client_certificate(directory, "sneaky-client")
+    client = await _secured(server, certificate, ENCRYPT)
+    send_create_session = client.uaclient.create_session
+
+    async def without_certificate(params: ua.CreateSessionParameters):
+        params.ClientCertificate = None  # asyncua's server then checked no certificate at all
+        return await send_create_session(params)
+
+    client.uaclient.create_session = without_certificate
+    with pytest.raises(ua.UaStatusCodeError) as refused:
+        async with client:
+            pass
+    assert refused.value.code == ua.StatusCodes.BadCertificateUntrusted

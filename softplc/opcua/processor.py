@@ -4,6 +4,10 @@
   (the channel falls back to asyncua's initial None policy). Here a None channel that was not
   offered serves discovery only (GetEndpoints, FindServers: what every client needs before it
   opens a secured channel); any other request on it gets BadSecurityPolicyRejected.
+- asyncua checks the client certificate of a session only if CreateSession carries one: a
+  client that opened a Sign/SignAndEncrypt channel with an untrusted certificate and left it
+  out of CreateSession got a session. Here the channel's certificate is always checked, and a
+  different one in CreateSession is refused (BadCertificateInvalid).
 - RegisterServer needs no session in asyncua: anyone could add entries to FindServers. We are
   not a discovery server, so it is refused (BadServiceUnsupported).
 - asyncua checks a password synchronously on the event loop. A UserName login is decided here
@@ -23,6 +27,7 @@ from asyncua.common.utils import Buffer, ServiceError
 from asyncua.crypto.security_policies import SecurityPolicyNone
 from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua.ua_binary import struct_from_binary
+from cryptography import x509
 
 from softplc.opcua.browsing import ContinuationPoints
 from softplc.opcua.peers import peer_host
@@ -62,6 +67,7 @@ class DiscoveryOnlyNone:
         return DiscoveryOnlyPolicy(peer_certificate)
 
 
+_CREATE_SESSION = ua.NodeId(ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary)
 _ACTIVATE_SESSION = ua.NodeId(ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary)
 _BROWSE = ua.NodeId(ua.ObjectIds.BrowseRequest_Encoding_DefaultBinary)
 _BROWSE_NEXT = ua.NodeId(ua.ObjectIds.BrowseNextRequest_Encoding_DefaultBinary)
@@ -85,6 +91,8 @@ class GuardedProcessor(UaProcessor):
             raise ServiceError(ua.StatusCodes.BadSecurityPolicyRejected)
         if typeid in _REGISTRATION:  # we are no discovery server; asyncua would accept them without a session
             raise ServiceError(ua.StatusCodes.BadServiceUnsupported)
+        if typeid == _CREATE_SESSION:
+            await self._check_channel_certificate(body)
         if typeid == _ACTIVATE_SESSION and not await self._password_accepted(requesthdr, body):
             # Answered here: asyncua would log an error line with each refused login.
             response = ua.ServiceFault()
@@ -121,6 +129,21 @@ class GuardedProcessor(UaProcessor):
             self.send_response(requesthdr.RequestHandle, seqhdr, ua.BrowseNextResponse(Parameters=ua.BrowseNextResult(Results=results)))
         return True
 
+    async def _check_channel_certificate(self, body: Buffer) -> None:
+        """Raise a ServiceError unless the certificate of a secured channel passes the validator."""
+        channel_certificate = self._connection.security_policy.peer_certificate
+        validator = self.iserver.certificate_validator
+        if not channel_certificate or validator is None:
+            return  # a None channel: no certificate proves anything
+        params = struct_from_binary(ua.CreateSessionParameters, body.copy())  # asyncua decodes its own
+        if params.ClientCertificate and _leaf(params.ClientCertificate) != _leaf(channel_certificate):
+            raise ServiceError(ua.StatusCodes.BadCertificateInvalid)
+        try:
+            certificate = x509.load_der_x509_certificate(_leaf(channel_certificate))
+        except ValueError:
+            raise ServiceError(ua.StatusCodes.BadCertificateInvalid) from None
+        await validator(certificate, params.ClientDescription)
+
     async def _password_accepted(self, requesthdr: Any, body: Buffer) -> bool:
         """Decide a UserName login before asyncua's synchronous ActivateSession asks the user
         manager, which then finds the success remembered. False: refuse the request. Anything
@@ -138,4 +161,14 @@ class GuardedProcessor(UaProcessor):
         except Exception:  # noqa: BLE001
             return True  # asyncua fails the same way: BadIdentityTokenInvalid, or a decoding error
         return bool(await check(peer_host(self.name), name, password or ""))
+
+
+def _leaf(der: bytes) -> bytes:
+    """The first certificate of a DER blob that may hold a chain (certificates one after another)."""
+    if len(der) < 2 or der[0] != 0x30:
+        return der
+    if der[1] < 0x80:
+        return der[:2 + der[1]]
+    width = der[1] & 0x7F
+    return der[:2 + width + int.from_bytes(der[2:2 + width], "big")]
 
