@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import os
 import signal
 import subprocess
@@ -55,6 +56,24 @@ async def test_the_worker_plans_exactly_what_an_inline_plan_gives() -> None:
         other = PlanRequest(4, unknown, (7.925, 5.925), (18.5, 7.5))
         assert (await planning.run(other)).ok
         assert fallback.requests == [other]  # a planner the worker does not hold runs in the fallback
+    finally:
+        planning.stop()
+
+
+async def test_a_worker_that_died_is_replaced(caplog: pytest.LogCaptureFixture) -> None:
+    floor = Floor(load_map(FACTORY))
+    planner = floor.planner(0.18)
+    planning = ProcessPlanning([planner], Recording())
+    await planning.start()
+    try:
+        first = planning.worker_pid
+        assert first is not None and first != os.getpid()
+        os.kill(first, signal.SIGKILL)
+        requests = [PlanRequest(serial, planner, (7.925, 5.925), (18.5, 7.5)) for serial in range(3)]
+        plans = await asyncio.gather(*(planning.run(request) for request in requests))  # all find it broken
+        assert all(plan.ok for plan in plans)
+        assert planning.worker_pid not in (None, first)
+        assert sum("planning worker process" in record.message for record in caplog.records) == 1
     finally:
         planning.stop()
 

@@ -17,6 +17,7 @@ import os
 import signal
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Protocol
@@ -100,6 +101,7 @@ class ProcessPlanning:
         self._index = {id(planner): index for index, planner in enumerate(self._planners)}
         self._fallback = fallback
         self._pool: ProcessPoolExecutor | None = None
+        self._restarting = asyncio.Lock()
         self.worker_pid: int | None = None
 
     async def start(self) -> None:
@@ -117,11 +119,34 @@ class ProcessPlanning:
 
     async def run(self, request: PlanRequest) -> Plan:
         index = self._index.get(id(request.planner))
-        if self._pool is None or index is None:
+        pool = self._pool
+        if pool is None or index is None:
             return await self._fallback.run(request)
         transit: _Transit = (index, request.serial, request.start, request.goal, request.discs,
                              request.keep_out, request.detour, request.make_way)
-        return await asyncio.get_running_loop().run_in_executor(self._pool, _plan_in_worker, transit)
+        loop = asyncio.get_running_loop()
+        try:
+            return await loop.run_in_executor(pool, _plan_in_worker, transit)
+        except BrokenProcessPool:
+            # The worker died (killed, out of memory): start a new one and plan there.
+            if not await self._restart(pool):
+                return await self._fallback.run(request)
+            assert self._pool is not None
+            return await loop.run_in_executor(self._pool, _plan_in_worker, transit)
+
+    async def _restart(self, broken: ProcessPoolExecutor) -> bool:
+        """Replace a broken pool (once, however many requests found it broken); False if that failed."""
+        async with self._restarting:
+            if self._pool is broken:
+                log.warning("the planning worker process (pid %s) died; starting a new one", self.worker_pid)
+                broken.shutdown(wait=False, cancel_futures=True)
+                self._pool = None
+                try:
+                    await self.start()
+                except Exception:  # planning still works in the fallback (a thread)
+                    log.exception("cannot start a planning worker process; planning in a thread instead")
+                    self._pool = None
+            return self._pool is not None
 
     def stop(self) -> None:
         if self._pool is not None:
