@@ -25,7 +25,7 @@ from softplc.clock import RealClock, SimClock
 from softplc.config import PlantConfig, load_config
 from softplc.durations import format_duration
 from softplc.expression import Condition, ExpressionError
-from softplc.schema import CONFIG_SCHEMA
+from softplc.schema import editor_schema
 from softplc.yamlsource import ConfigError
 
 EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
@@ -172,7 +172,7 @@ def summary(config: PlantConfig) -> str:
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
-    print(json.dumps(CONFIG_SCHEMA, indent=2))
+    print(json.dumps(editor_schema(), indent=2))
     return EXIT_OK
 
 

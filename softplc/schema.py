@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from softplc.datatypes import TYPE_NAMES
+from softplc.durations import DURATION_REGEX
 
 NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
 NAME_RULE = "letters, digits and _, not starting with a digit"
@@ -230,3 +231,29 @@ CONFIG_SCHEMA: dict[str, Any] = {
     },
     "additionalProperties": False,
 }
+
+
+# For editors: durations are also checked for their form (the runtime's own check says more:
+# `softplc check` reports "bad interval '10 parsecs': write a duration such as 10ms...").
+STRICT_DURATION: dict[str, Any] = {
+    "description": DURATION["description"],
+    "anyOf": [
+        {"type": "string", "pattern": DURATION_REGEX},
+        {"type": "number", "exclusiveMinimum": 0},
+    ],
+}
+
+
+def editor_schema() -> dict[str, Any]:
+    """The schema `softplc schema` prints: CONFIG_SCHEMA with durations checked for their form too."""
+
+    def strict(node: Any) -> Any:
+        if node is DURATION:
+            return STRICT_DURATION
+        if isinstance(node, dict):
+            return {key: strict(value) for key, value in node.items()}
+        if isinstance(node, list):
+            return [strict(item) for item in node]
+        return node
+
+    return strict(CONFIG_SCHEMA)

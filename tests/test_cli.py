@@ -150,6 +150,10 @@ def test_schema_command_prints_a_valid_json_schema_the_default_plant_meets(cli) 
     jsonschema.Draft202012Validator.check_schema(schema)
     plant = yaml.safe_load((REPO / "tagdb.yaml").read_text())
     jsonschema.Draft202012Validator(schema).validate(plant)
+    # Editors are told about malformed durations too.
+    bad = {"version": 1, "tasks": {"a": {"interval": "10 parsecs"}, "b": {"interval": -1}, "c": {"interval": "250us"}}}
+    assert sorted(error.json_path for error in jsonschema.Draft202012Validator(schema).iter_errors(bad)) == [
+        "$.tasks.a.interval", "$.tasks.b.interval"]
 
 
 @pytest.mark.parametrize("command", [[], ["run"], ["check"], ["tags"], ["schema"]])
