@@ -272,7 +272,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             from softplc.realtime import use_normal_priority_executor
 
             use_normal_priority_executor(loop)
-        interrupts = 0
+        interrupts = len(early_interrupts)
+        if early_interrupts:
+            runtime.request_stop("interrupted (Ctrl-C)")
 
         def interrupt() -> None:
             nonlocal interrupts
@@ -296,12 +298,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     mode += f", {args.loop} event loop"
     print(f"softplc {__version__}: plant '{config.name}' — {summary(config)}; {mode}", file=sys.stderr)
     started = time.monotonic()
+    # Until the event loop's own handler is in place, a Ctrl-C is noted (and ends the run as soon
+    # as it starts) rather than raised wherever the interpreter happens to be, e.g. half-way
+    # through creating the event loop.
+    early_interrupts: list[int] = []
+    previous_handler = signal.signal(signal.SIGINT, lambda signum, frame: early_interrupts.append(signum))
     try:
         with asyncio.Runner(loop_factory=loop_factory) as runner:
             reason = runner.run(main_async())
     except AdapterError as error:
         print(f"softplc: cannot start: {error}", file=sys.stderr)
         return EXIT_FAILURE
+    finally:
+        signal.signal(signal.SIGINT, previous_handler)
     if show_status:
         print(file=sys.stderr)
     wall = time.monotonic() - started

@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -57,7 +58,7 @@ async def test_the_worker_plans_exactly_what_an_inline_plan_gives() -> None:
         assert (await planning.run(other)).ok
         assert fallback.requests == [other]  # a planner the worker does not hold runs in the fallback
     finally:
-        planning.stop()
+        await planning.stop()
 
 
 async def test_a_worker_that_died_is_replaced(caplog: pytest.LogCaptureFixture) -> None:
@@ -73,9 +74,9 @@ async def test_a_worker_that_died_is_replaced(caplog: pytest.LogCaptureFixture) 
         plans = await asyncio.gather(*(planning.run(request) for request in requests))  # all find it broken
         assert all(plan.ok for plan in plans)
         assert planning.worker_pid not in (None, first)
-        assert sum("planning worker process" in record.message for record in caplog.records) == 1
+        assert sum("planning worker process" in record.message for record in caplog.records) == 1, caplog.records
     finally:
-        planning.stop()
+        await planning.stop()
 
 
 async def test_a_fleet_on_the_real_clock_plans_in_a_worker_process(tmp_path: Path) -> None:
@@ -117,3 +118,32 @@ def test_ctrl_c_while_the_planning_worker_starts_never_hangs(tmp_path: Path, del
             process.wait()
     assert process.returncode in (0, 130), output
     assert "Traceback" not in output, output
+
+
+def test_a_script_without_a_main_guard_gets_its_worker(tmp_path: Path) -> None:
+    # The worker must not re-run the program that embeds softplc (a multiprocessing pool would).
+    script = tmp_path / "embed.py"
+    script.write_text(textwrap.dedent(f"""\
+        import asyncio
+        from softplc.fleet.floor import Floor
+        from softplc.fleet.gridmap import load_map
+        from softplc.fleet.driver import PlanRequest
+        from softplc.fleet.planning import ClockPlanning, ProcessPlanning
+        from softplc.clock import RealClock
+
+        print("script body ran", flush=True)  # once, by this process only
+
+        async def main():
+            planner = Floor(load_map({str(FACTORY)!r})).planner(0.18)
+            planning = ProcessPlanning([planner], ClockPlanning(RealClock()))
+            await planning.start()
+            plan = await planning.run(PlanRequest(1, planner, (7.925, 5.925), (18.5, 7.5)))
+            print("worker", planning.worker_pid is not None, "plan", plan.ok, flush=True)
+            await planning.stop()
+
+        asyncio.run(main())
+    """))
+    result = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == ["script body ran", "worker True plan True"], result.stdout + result.stderr
+    assert "cannot start" not in result.stderr, result.stderr

@@ -293,7 +293,7 @@ class FleetAdapter:
                 pass
         self._tasks.clear()
         if self._planning is not None:
-            self._planning.stop()
+            await self._planning.stop()
             self._planning = None
         if self._unsubscribe is not None:
             self._unsubscribe()
