@@ -8,7 +8,9 @@ Goal (issue 2): the 10 ms task's start latency has p99 <= 1 ms and max <= 5 ms.
 
 An independent process (bench/stall_probe.py, waking every 1 ms) runs beside each case: when
 it, too, was late by more than 5 ms at the moment a cycle started late, the whole machine
-stalled (a VM's host, the kernel), not softplc. The report counts those coincidences.
+stalled (a VM's host, the kernel), not softplc. The report counts those coincidences. The probe
+only sees a stall of the CPU it runs on: with `--pin CPU` the runtime and the probe share one
+CPU, so every stall of that CPU is seen by both.
 
     .venv/bin/python bench/scan_jitter.py                 # 4 cases x 60 s
     .venv/bin/python bench/scan_jitter.py --seconds 10 --loops asyncio --intervals 10ms
@@ -20,6 +22,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -184,15 +187,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-adapters", action="store_true", help="scan only: start no server or fleet")
     parser.add_argument("--state-dir", type=Path, default=Path("/tmp/softplc-bench-state"))
     parser.add_argument("--rt-priority", type=int, metavar="N", help="SCHED_FIFO priority, as softplc run --rt-priority")
+    parser.add_argument("--pin", type=int, metavar="CPU", help="run the runtime (and the stall probe) on this CPU only")
     args = parser.parse_args(argv)
+    if args.pin is not None:
+        os.sched_setaffinity(0, {args.pin})
     if args.rt_priority is not None:
         set_realtime_priority(args.rt_priority)
     intervals = [parse_duration(text) for text in args.intervals.split(",")]
     loops = [name.strip() for name in args.loops.split(",")]
 
     mode = f"SCHED_FIFO priority {args.rt_priority}" if args.rt_priority is not None else "normal scheduling"
+    if args.pin is not None:
+        mode += f", pinned to CPU {args.pin} with the stall probe"
     print(f"scan jitter: {args.config.name}, {args.seconds:g} s per case after {WARMUP_S:g} s warm-up, {mode}; "
-          f"Python {platform.python_version()}, {platform.machine()}, {len(__import__('os').sched_getaffinity(0))} CPUs")
+          f"Python {platform.python_version()}, {platform.machine()}, {os.cpu_count()} CPUs")
     results: list[Result] = []
     for loop_name in loops:
         for interval in intervals:
