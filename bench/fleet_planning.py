@@ -4,11 +4,16 @@ Planning: every ordered pair of the factory map's stations and robot starts (SPE
 for a TurtleBot (radius 0.18 m) and the thesis's largest robot (500 x 600 mm, radius 0.39 m),
 on the default 0.1 m planning grid and on a 0.05 m grid. Goal: the median plan on the default
 grid takes under 20 ms. Plans may take longer (a long way round the partitions), so they never
-run on the event loop: the robots call them through clock.run_blocking (an executor thread).
+run on the event loop: in real time the runtime sends them to a worker process
+(softplc/fleet/planning.py).
 
-Event-loop stall: on the real clock, every pair is planned through clock.run_blocking, back
-to back, while a 1 ms ticker on the event loop records how late it wakes up. Goal: the loop
-is never held up for 20 ms or more by planning.
+Event-loop stall: on the real clock, every pair is planned back to back, once in an executor
+thread (clock.run_blocking: the GIL is shared with the loop) and once in the planning worker
+process (5 rounds each), while a 1 ms ticker on the event loop records how late it wakes up
+(and once with no planning at all). Goal: with the worker process the ticker's p99 stays within
+0.5 ms of the idle loop's (its maximum shows the machine's own stalls). The ticker waits as the
+scan engine does (RealClock: a timer, then a short spin), since asyncio's timers alone are up to
+1 ms late whenever I/O wakes the loop in between (epoll's millisecond timeouts).
 
 One robot: a TurtleBot driven around all four stations by the fleet adapter on the simulated
 clock; the wall time of each control cycle (read goal tags, traffic check, pure pursuit,
@@ -33,8 +38,10 @@ sys.path.insert(0, str(REPO))
 from softplc.clock import RealClock, SimClock  # noqa: E402
 from softplc.config import load_config  # noqa: E402
 from softplc.fleet.adapter import FleetAdapter  # noqa: E402
+from softplc.fleet.driver import PlanRequest  # noqa: E402
 from softplc.fleet.floor import Floor  # noqa: E402
 from softplc.fleet.gridmap import load_map  # noqa: E402
+from softplc.fleet.planning import ClockPlanning, ProcessPlanning  # noqa: E402
 from softplc.fleet.robots import load_robots  # noqa: E402
 from softplc.runtime import Runtime  # noqa: E402
 
@@ -49,29 +56,51 @@ def percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(round(q / 100 * (len(ordered) - 1))))]
 
 
-async def loop_stall() -> tuple[float, float, int]:
+ROUNDS = 5
+STALL_GOAL_MS = 0.5  # ms of p99 lateness planning may add
+
+
+async def idle_ticker(seconds: float = 2.0) -> tuple[float, float]:
+    """Worst and p99 lateness (ms) of a 1 ms ticker on an otherwise idle loop."""
+    clock = RealClock()
+    late: list[float] = []
+    end = clock.now() + seconds
+    while clock.now() < end:
+        target = clock.now() + 0.001
+        await clock.sleep_until(target)  # as the scan engine waits: asyncio's timers alone are ~1 ms coarse
+        late.append((clock.now() - target) * 1000)
+    return max(late), percentile(late, 99)
+
+
+async def loop_stall(in_worker: bool) -> tuple[float, float, int]:
     """Worst and p99 ticker lateness (ms) while planning every pair off the loop; plans made."""
     clock = RealClock()
     planner = Floor(load_map(FACTORY)).planner(0.39)
+    worker = ProcessPlanning([planner], ClockPlanning(clock)) if in_worker else None
+    if worker is not None:
+        await worker.start()
     late: list[float] = []
     done = asyncio.Event()
 
     async def ticker() -> None:
         while not done.is_set():
-            target = time.perf_counter() + 0.001
-            await asyncio.sleep(0.001)
-            late.append((time.perf_counter() - target) * 1000)
+            target = clock.now() + 0.001
+            await clock.sleep_until(target)
+            late.append((clock.now() - target) * 1000)
 
     ticking = asyncio.ensure_future(ticker())
     plans = 0
-    for a in POINTS:
-        for b in POINTS:
-            if a != b:
-                plan = await clock.run_blocking(planner.plan, a, b)
-                assert plan.ok
-                plans += 1
+    for a, b in [(a, b) for a in POINTS for b in POINTS if a != b] * ROUNDS:
+        if worker is not None:
+            plan = await worker.run(PlanRequest(plans, planner, a, b))
+        else:
+            plan = await clock.run_blocking(planner.plan, a, b)
+        assert plan.ok
+        plans += 1
     done.set()
     await ticking
+    if worker is not None:
+        await worker.stop()
     return max(late), percentile(late, 99), plans
 
 
@@ -131,15 +160,22 @@ async def one_robot() -> list[float]:
 
 def main() -> None:
     ok = planning()
-    stall, stall_p99, plans = asyncio.run(loop_stall())
-    print(f"\nevent loop while {plans} plans ran through clock.run_blocking: 1 ms ticker late by p99 {stall_p99:.2f} ms, "
-          f"max {stall:.2f} ms")
+    print()
+    idle_max, idle_p99 = asyncio.run(idle_ticker())
+    print(f"event loop with no planning: 1 ms ticker late by p99 {idle_p99:.2f} ms, max {idle_max:.2f} ms")
+    worker_ok = True
+    for in_worker, where in ((False, "in an executor thread (clock.run_blocking)"), (True, "in the planning worker process")):
+        stall, stall_p99, plans = asyncio.run(loop_stall(in_worker))
+        print(f"event loop while {plans} plans ran {where}: 1 ms ticker late by p99 {stall_p99:.2f} ms, max {stall:.2f} ms")
+        if in_worker and stall_p99 > idle_p99 + STALL_GOAL_MS:
+            print(f"  !!! GOAL MISSED !!! ticker p99 {stall_p99:.2f} ms while planning in the worker (goal <= idle {idle_p99:.2f} + {STALL_GOAL_MS:g} ms)")
+            worker_ok = False
     steps = asyncio.run(one_robot())
     print(f"\none robot, {len(steps)} control cycles while driving (3 robots on the floor, simulated clock):")
     print(f"  step wall time: median {statistics.median(steps):.1f} us, p99 {percentile(steps, 99):.1f} us, max {max(steps):.1f} us "
           f"(max includes cycles that received a new plan)")
     print(f"A* median on the default 0.1 m grid within {PLAN_GOAL_MS:g} ms: {'goal met' if ok else 'GOAL MISSED'}")
-    print(f"planning never stalls the event loop for {PLAN_GOAL_MS:g} ms: {'goal met' if stall < PLAN_GOAL_MS else 'GOAL MISSED'}")
+    print(f"planning in the worker adds at most {STALL_GOAL_MS:g} ms to the loop's p99 lateness: {'goal met' if worker_ok else 'GOAL MISSED'}")
     step_ok = statistics.median(steps) < STEP_GOAL_US
     print(f"one robot's cycle under {STEP_GOAL_US:g} us: {'goal met' if step_ok else 'GOAL MISSED'}")
 
