@@ -145,8 +145,9 @@ async def main_async(args: argparse.Namespace) -> list[Measurement]:
         target = Target(protocol, args.scenario, scan, samples=args.samples, loop=args.loop)
         runs.append(await measure(target, _progress(protocol, args.samples)))
     if not args.no_naive:
-        print(f"naive asyncua, {args.scenario}, loop every {args.scan:g} ms, {args.samples} samples ...", file=sys.stderr, flush=True)
-        runs.append(await run_naive(args.scenario, scan, args.samples))
+        naive_samples = args.naive_samples or args.samples
+        print(f"naive asyncua, {args.scenario}, loop every {args.scan:g} ms, {naive_samples} samples ...", file=sys.stderr, flush=True)
+        runs.append(await run_naive(args.scenario, scan, naive_samples))
     return runs
 
 
@@ -169,6 +170,7 @@ def main() -> int:
     parser.add_argument("--scan", type=float, default=10.0, metavar="MS")
     parser.add_argument("--protocols", default="opcua,modbus", help="comma-separated: opcua,modbus")
     parser.add_argument("--no-naive", action="store_true", help="leave out the naive baseline")
+    parser.add_argument("--naive-samples", type=int, metavar="N", help="samples of the naive baseline (default: --samples)")
     parser.add_argument("--loop", choices=("asyncio", "uvloop"), default="asyncio")
     parser.add_argument("--out", type=Path, help="write statistics.json, samples.csv (a label column per run), report.txt here")
     args = parser.parse_args()
