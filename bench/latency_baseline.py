@@ -140,7 +140,7 @@ def check_goals(run: Measurement, scan_ms: float) -> list[str]:
 async def main_async(args: argparse.Namespace) -> list[Measurement]:
     scan = args.scan / 1000.0
     runs: list[Measurement] = []
-    for protocol in args.protocols.split(","):
+    for protocol in [name for name in args.protocols.split(",") if name]:
         print(f"softplc {protocol}, {args.scenario}, scan {args.scan:g} ms, {args.samples} samples ...", file=sys.stderr, flush=True)
         target = Target(protocol, args.scenario, scan, samples=args.samples, loop=args.loop)
         runs.append(await measure(target, _progress(protocol, args.samples)))
@@ -168,7 +168,7 @@ def main() -> int:
     parser.add_argument("--scenario", choices=("slow", "average", "fast"), default="fast")
     parser.add_argument("--samples", type=int, default=1000)
     parser.add_argument("--scan", type=float, default=10.0, metavar="MS")
-    parser.add_argument("--protocols", default="opcua,modbus", help="comma-separated: opcua,modbus")
+    parser.add_argument("--protocols", default="opcua,modbus", help="comma-separated: opcua,modbus; empty for the naive baseline alone")
     parser.add_argument("--no-naive", action="store_true", help="leave out the naive baseline")
     parser.add_argument("--naive-samples", type=int, metavar="N", help="samples of the naive baseline (default: --samples)")
     parser.add_argument("--loop", choices=("asyncio", "uvloop"), default="asyncio")

@@ -107,6 +107,25 @@ def mbap(transaction: int, unit: int, pdu: bytes) -> bytes:
     return transaction.to_bytes(2, "big") + b"\0\0" + (len(pdu) + 1).to_bytes(2, "big") + bytes([unit]) + pdu
 
 
+# A plant with one 10 ms task whose program doubles a setpoint (the robustness and connection tests).
+DOUBLER_PLANT = """
+version: 1
+tags:
+  counter: {type: uint32, access: ro}
+  setpoint: {type: float64}
+  doubled: {type: float64, access: ro}
+tasks:
+  fast:
+    interval: 10ms
+    programs:
+      - name: doubler
+        program: modbus_helpers:Doubler
+        bind: {setpoint: setpoint, doubled: doubled, scans: counter}
+servers:
+  modbus: {}
+"""
+
+
 class Doubler(Program):
     """Test program: `doubled` = 2 × `setpoint` and `scans` counts scans, written every scan."""
 

@@ -8,6 +8,7 @@ import struct
 import textwrap
 
 import pytest
+from modbus_helpers import DOUBLER_PLANT as PLANT
 from modbus_helpers import mbap, start_plant, stop_plant
 
 from softplc.cli import main
@@ -15,22 +16,6 @@ from softplc.config import load_config
 from softplc.modbus.connections import EventReport
 from softplc.modbus.settings import ModbusSettings
 
-PLANT = """
-version: 1
-tags:
-  counter: {type: uint32, access: ro}
-  setpoint: {type: float64}
-  doubled: {type: float64, access: ro}
-tasks:
-  fast:
-    interval: 10ms
-    programs:
-      - name: doubler
-        program: modbus_helpers:Doubler
-        bind: {setpoint: setpoint, doubled: doubled, scans: counter}
-servers:
-  modbus: {}
-"""
 CONNECTIONS_LOGGER = "softplc.modbus.connections"
 
 

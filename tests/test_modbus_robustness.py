@@ -9,24 +9,9 @@ import socket
 import struct
 
 import pytest
+from modbus_helpers import DOUBLER_PLANT as PLANT
 from modbus_helpers import mbap, raw_request, start_plant, stop_plant, value_of
 
-PLANT = """
-version: 1
-tags:
-  counter: {type: uint32, access: ro}
-  setpoint: {type: float64}
-  doubled: {type: float64, access: ro}
-tasks:
-  fast:
-    interval: 10ms
-    programs:
-      - name: doubler
-        program: modbus_helpers:Doubler
-        bind: {setpoint: setpoint, doubled: doubled, scans: counter}
-servers:
-  modbus: {}
-"""
 
 
 @pytest.fixture

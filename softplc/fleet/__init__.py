@@ -32,8 +32,9 @@ follows the path with pure pursuit within its own speed limits capped by the flo
 by id order. Robots learn about each other only through the tags.
 """
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from softplc.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.fleet.adapter import FleetAdapter
@@ -70,7 +71,7 @@ _MODULES = {
     "softplc.fleet.robots": ("Hardware", "Pose", "RobotFile", "RobotSpec", "TaskFile", "TaskSpec", "load_robots", "load_tasks"),
     "softplc.fleet.settings": ("FleetSettings",),
 }
-_EXPORTS = {name: module for module, names in _MODULES.items() for name in names}
+__getattr__, __dir__ = lazy_exports(__name__, _MODULES)
 
 __all__ = [
     "Compatibility", "DriverSettings", "FleetAdapter", "FleetSettings", "Floor", "Hardware", "NavState",
@@ -78,15 +79,3 @@ __all__ = [
     "SpeedLimits", "TaskFile", "TaskSpec", "compatibility_matrix", "compatible", "compatible_robots",
     "compatible_tasks", "incompatibilities", "load_map", "load_robots", "load_tasks",
 ]
-
-
-def __getattr__(name: str) -> Any:
-    if name not in _EXPORTS:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_EXPORTS[name]), name)
-    globals()[name] = value  # the next lookup does not come here
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])

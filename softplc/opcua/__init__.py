@@ -1,7 +1,8 @@
 """OPC UA server adapter: every tag of the plant, typed, validated, secured (see server.py)."""
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from softplc.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.opcua.address_space import tag_node_id
@@ -25,21 +26,9 @@ _MODULES = {
     "softplc.opcua.users": ("UserStore",),
     "softplc.opcua.variants": ("variant_for",),
 }
-_EXPORTS = {name: module for module, names in _MODULES.items() for name in names}
+__getattr__, __dir__ = lazy_exports(__name__, _MODULES)
 
 __all__ = [
     "DEFAULT_NAMESPACE", "ClientCertificate", "OpcUaServer", "OpcUaSettings", "Pki", "Role", "UserStore",
     "ensure_client_certificate", "make_client", "tag_node_id", "variant_for",
 ]
-
-
-def __getattr__(name: str) -> Any:
-    if name not in _EXPORTS:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_EXPORTS[name]), name)
-    globals()[name] = value  # the next lookup does not come here
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])

@@ -5,8 +5,9 @@
     result.summary["goals_per_task"]                           # {"t01": 6, "t02": 3}
 """
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from softplc.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.scenarios.runner import RunResult, run_scenario, run_scenario_async
@@ -18,18 +19,6 @@ _MODULES = {
     "softplc.scenarios.runner": ("RunResult", "run_scenario", "run_scenario_async"),
     "softplc.scenarios.spec": ("Scenario", "builtin_scenarios", "find_scenario", "load_scenario"),
 }
-_EXPORTS = {name: module for module, names in _MODULES.items() for name in names}
+__getattr__, __dir__ = lazy_exports(__name__, _MODULES)
 
 __all__ = ["RunResult", "Scenario", "builtin_scenarios", "find_scenario", "load_scenario", "run_scenario", "run_scenario_async"]
-
-
-def __getattr__(name: str) -> Any:
-    if name not in _EXPORTS:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_EXPORTS[name]), name)
-    globals()[name] = value  # the next lookup does not come here
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])
