@@ -272,9 +272,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             from softplc.realtime import use_normal_priority_executor
 
             use_normal_priority_executor(loop)
-        interrupts = len(early_interrupts)
-        if early_interrupts:
-            runtime.request_stop("interrupted (Ctrl-C)")
+        interrupts = 0
 
         def interrupt() -> None:
             nonlocal interrupts
@@ -288,6 +286,11 @@ def cmd_run(args: argparse.Namespace) -> int:
                 loop.add_signal_handler(sig, interrupt)
             except (NotImplementedError, RuntimeError):
                 pass
+        # Only now: a Ctrl-C that came after this check but before the handlers were in place
+        # would otherwise be lost.
+        if early_interrupts:
+            interrupts = len(early_interrupts)
+            runtime.request_stop("interrupted (Ctrl-C)")
         status = asyncio.create_task(_status_loop(runtime, show_status, args))
         try:
             return await runtime.run(duration=args.duration, until=until)

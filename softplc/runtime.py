@@ -144,6 +144,8 @@ class Runtime:
             raise RuntimeError("runtime already started")
         self._started = True
         self._stop_event = asyncio.Event()
+        if self.stop_reason:  # a stop requested before the start (an early Ctrl-C) still counts
+            self._stop_event.set()
         if self._retain_enabled:
             self._load_retained()
         self.engine.start_programs()

@@ -3,6 +3,7 @@ system tags, retained tags, --until, reproducibility."""
 
 from __future__ import annotations
 
+import asyncio
 import sqlite3
 from collections.abc import Callable
 from pathlib import Path
@@ -277,6 +278,15 @@ async def test_until_stops_right_after_the_cycle_that_made_it_true(sim_runtime) 
     assert reason == "condition met: n_fast >= 37 or n_slow > 1000"
     assert runtime.db.value("n_fast") == 37
     assert runtime.clock.now() == pytest.approx(0.36)
+
+
+async def test_a_stop_requested_before_the_start_ends_the_run_at_once(sim_runtime) -> None:
+    # An early Ctrl-C (before the event loop's handler is in place) is requested this way.
+    runtime = sim_runtime(FAULTS)
+    runtime.request_stop("interrupted (Ctrl-C)")
+    reason = await asyncio.wait_for(runtime.run(), 10)
+    assert reason == "interrupted (Ctrl-C)"
+    assert runtime.clock.now() < 0.1
 
 
 async def test_until_over_system_tags(sim_runtime) -> None:
