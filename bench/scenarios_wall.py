@@ -12,17 +12,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import resource
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from bench.timing import load_average, run_softplc  # noqa: E402
 from softplc.scenarios.spec import builtin_scenarios  # noqa: E402
 
 GOAL_S = 10.0
@@ -30,16 +27,8 @@ GOAL_S = 10.0
 
 def run_once(name: str, out: Path) -> tuple[float, float, dict]:
     """Wall seconds, CPU seconds (user + system of the process) and the summary of one run."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    started = time.monotonic()
-    done = subprocess.run([sys.executable, "-m", "softplc.cli", "scenario", "run", name, "--out", str(out), "--json"],
-                          capture_output=True, text=True, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
-    wall = time.monotonic() - started
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    if done.returncode != 0:
-        raise SystemExit(f"{name} failed:\n{done.stderr}")
-    return wall, cpu, json.loads(done.stdout)
+    run = run_softplc("scenario", "run", name, "--out", str(out), "--json")
+    return run.wall, run.cpu, json.loads(run.done.stdout)
 
 
 def main() -> int:
@@ -48,7 +37,7 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=2, help="runs per scenario (best wall time counts; default 2)")
     args = parser.parse_args()
     names = args.names or [path.stem for path in builtin_scenarios()]
-    print(f"load average at start: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(f"load average at start: {load_average()}")
     print(f"{'scenario':<22} {'sim s':>8} {'wall s':>7} {'CPU s':>6} {'x real time':>11}  records identical")
     missed = 0
     with tempfile.TemporaryDirectory() as tmp:
@@ -69,7 +58,7 @@ def main() -> int:
             missed += bool(flag)
             same = ("yes" if identical else "NO") if len(outs) > 1 else "(one run)"
             print(f"{name:<22} {sim:8.1f} {best:7.2f} {min(cpus):6.2f} {sim / best:11.0f}  {same}{flag}")
-    print(f"load average at end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(f"load average at end: {load_average()}")
     return 1 if missed else 0
 
 
