@@ -63,7 +63,7 @@ class DataType(enum.Enum):
 
         Accepted lossless conversions: bool ← bool or 0/1 integers; integers ← integers and
         floats with an integral value (3.0 → 3); floats ← integers and floats (float32 is
-        rounded to single precision); string ← string only. NumPy scalars count as the Python
+        rounded to single precision); string ← valid Unicode text only (see `_check_text`). NumPy scalars count as the Python
         value they hold, and the result is always a plain Python value.
         """
         value = _native(value)
@@ -74,9 +74,10 @@ class DataType(enum.Enum):
                 return bool(value)
             raise TypeMismatch(f"expected bool, got {_describe(value)}")
         if self is DataType.STRING:
-            if isinstance(value, str):
-                return value
-            raise TypeMismatch(f"expected string, got {_describe(value)}")
+            if not isinstance(value, str):
+                raise TypeMismatch(f"expected string, got {_describe(value)}")
+            _check_text(value)
+            return value
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise TypeMismatch(f"expected {self.value}, got {_describe(value)}")
         if self.is_integer:
@@ -114,6 +115,20 @@ def _native(value: Any) -> Any:
     if getattr(value, "shape", None) == () and hasattr(value, "item"):
         return value.item()  # np.int64(1) → 1, np.bool_(True) → True, np.float32(0.5) → 0.5
     return value
+
+
+def _check_text(value: str) -> None:
+    """Refuse a string that is not valid Unicode text (what every protocol can carry as UTF-8).
+
+    A decoder with `surrogateescape` (asyncua's) turns invalid UTF-8 bytes into lone surrogates;
+    such a string cannot be encoded again, so it would break every reader after the writer.
+    """
+    if value.isascii():
+        return
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError as error:
+        raise TypeMismatch(f"not valid UTF-8 text: invalid character at position {error.start}") from None
 
 
 def _describe(value: Any) -> str:

@@ -136,13 +136,13 @@ class ProgramInstance:
                 value = attributes[var]
                 if isinstance(binding, str):
                     if value != image[binding] or type(value) is not type(image[binding]):
-                        outputs[binding] = db.validate(binding, value, client=False)
+                        outputs[binding] = db.validate(binding, value, role=None)
                     continue
                 if not isinstance(value, list) or len(value) != len(binding):
                     raise WriteRejected(var, Rule.TYPE_MISMATCH, f"must stay a list of {len(binding)} values")
                 for tag, item in zip(binding, value):
                     if item != image[tag] or type(item) is not type(image[tag]):
-                        outputs[tag] = db.validate(tag, item, client=False)
+                        outputs[tag] = db.validate(tag, item, role=None)
         except WriteRejected as rejected:
             self.fault(f"wrote an invalid value: {rejected}", now)
             return {}

@@ -27,7 +27,9 @@ TIME = SYSTEM_PREFIX + "time"
 
 
 def _tag(name: str, data_type: DataType, description: str, *, unit: str = "", access: Access = Access.RO, group: str = "_sys") -> TagDef:
-    return TagDef(name=name, type=data_type, initial=data_type.default, unit=unit, description=description, access=access, group=group)
+    # Only the command tags (rw) accept client writes; every other system tag is the runtime's own.
+    return TagDef(name=name, type=data_type, initial=data_type.default, unit=unit, description=description, access=access,
+                  group=group, runtime_only=access is Access.RO)
 
 
 def system_tag_definitions(tasks: list[TaskConfig]) -> list[TagDef]:

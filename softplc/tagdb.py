@@ -1,11 +1,15 @@
 """The tag database: every tag's value, the write journal, and change notification.
 
-Adapters (protocol servers, robots, the HMI) talk to the core only through this API:
+Adapters (protocol servers, robots, the HMI, the historian) talk to the core only through
+this API:
 
 - read a tag or a snapshot (`db[name]`, `db.snapshot(names)`);
-- submit writes (`db.submit(...)`): each item is validated at once, exactly as a PLC validates
-  a client write, and the valid ones are journaled and applied at the next cycle boundary;
-- be told of changes (`db.on_change(callback)`), called after each batch is applied.
+- submit writes (`db.submit(items, origin)`): each item is validated at once, exactly as a PLC
+  validates a client write — type, range, and what the writer's role may do — and the valid ones
+  are journaled and applied at the next cycle boundary;
+- be told of changes (`db.on_change(callback)`), called after each batch is applied;
+- be told of every client write, accepted or refused, with its origin (`db.on_write(callback)`):
+  the one place an audit trail or a write log listens, so no adapter keeps its own.
 
 Programs' outputs are committed by the scan engine with `db.commit(...)`.
 """
@@ -19,7 +23,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from softplc.datatypes import TypeMismatch
-from softplc.tags import Quality, Tag, TagDef
+from softplc.roles import Role
+from softplc.tags import Access, Quality, Tag, TagDef
 
 log = logging.getLogger(__name__)
 
@@ -31,6 +36,8 @@ class Rule(enum.Enum):
     READ_ONLY = "read-only"
     TYPE_MISMATCH = "type mismatch"
     OUT_OF_RANGE = "out of range"
+    ACCESS_DENIED = "access denied"  # the writer's role may not write at all (a viewer)
+    INVALID_REQUEST = "invalid request"  # refused by the protocol before any tag rule (e.g. a quality, an index range)
 
 
 class WriteRejected(Exception):
@@ -44,16 +51,63 @@ class WriteRejected(Exception):
 
 
 @dataclass(frozen=True, slots=True)
+class Origin:
+    """Who asked for a write: the path it came by, the user and the peer address, and the role.
+
+    `role=None` is code inside the runtime (robot drivers, the runtime itself): no access rule
+    applies and its writes are not reported to `on_write` listeners. A client always has a role.
+    """
+
+    source: str  # "opcua", "modbus", "hmi", "cli", "fleet:r01"...
+    user: str = ""
+    peer: str = ""
+    role: Role | None = Role.OPERATOR
+
+    @property
+    def internal(self) -> bool:
+        return self.role is None
+
+    def __str__(self) -> str:
+        who = self.user or ""
+        if self.peer:
+            who = f"{who}@{self.peer}" if who else self.peer
+        return f"{self.source}:{who}" if who else self.source
+
+
+def origin_of(origin: Origin | str) -> Origin:
+    """An Origin; a plain string is shorthand for an operator client of that name (scripts, tests)."""
+    return origin if isinstance(origin, Origin) else Origin(origin)
+
+
+@dataclass(frozen=True, slots=True)
 class Write:
     """One journaled write: a new value (and optionally a quality) for a tag."""
 
     tag: str
     value: Any
-    source: str
+    origin: Origin
     quality: Quality = Quality.GOOD
 
 
+@dataclass(frozen=True, slots=True)
+class WriteEvent:
+    """A client's write of one tag, accepted (journaled) or refused, as `on_write` listeners see it."""
+
+    time: float  # wall-clock seconds of the runtime clock (simulated under --sim)
+    origin: Origin
+    tag: str
+    old: Any  # the tag's value when the write arrived (None for an unknown tag)
+    new: Any  # the value asked for (coerced to the tag's type when accepted)
+    rule: Rule | None = None  # the rule broken; None when accepted
+    detail: str = ""
+
+    @property
+    def accepted(self) -> bool:
+        return self.rule is None
+
+
 ChangeCallback = Callable[[Sequence[Tag]], None]
+WriteCallback = Callable[[Sequence[WriteEvent]], None]
 
 
 class TagDatabase:
@@ -69,6 +123,7 @@ class TagDatabase:
             self._tags[definition.name] = Tag(definition, start)
         self._journal: list[Write] = []
         self._callbacks: list[ChangeCallback] = []
+        self._write_callbacks: list[WriteCallback] = []
 
     # -- reading --------------------------------------------------------------------------
 
@@ -102,18 +157,18 @@ class TagDatabase:
 
     # -- validation -----------------------------------------------------------------------
 
-    def validate(self, name: str, value: Any, *, client: bool = True) -> Any:
+    def validate(self, name: str, value: Any, *, role: Role | None = Role.OPERATOR) -> Any:
         """Return `value` coerced to the tag's type, or raise WriteRejected.
 
-        `client=True` applies the access rule (ro tags are read-only for clients); programs
-        and drivers inside the runtime pass `client=False`.
+        `role` is the writer's (see `softplc.roles`); `None` is code inside the runtime
+        (programs, drivers), to which no access rule applies.
         """
         tag = self._tags.get(name)
         if tag is None:
             raise WriteRejected(name, Rule.UNKNOWN_TAG, "no such tag")
         definition = tag.definition
-        if client and not definition.writable_by_clients:
-            raise WriteRejected(name, Rule.READ_ONLY, "the tag is read-only for clients")
+        if role is not None:
+            self._check_access(definition, role)
         try:
             coerced = definition.type.coerce(value)
         except TypeMismatch as error:
@@ -127,37 +182,93 @@ class TagDatabase:
             raise WriteRejected(name, Rule.OUT_OF_RANGE, f"{coerced} is above the maximum {definition.max}")
         return coerced
 
+    def writable(self, name: str, role: Role) -> bool:
+        """Whether a client with `role` may write the tag at all (for UserAccessLevel, HMI controls)."""
+        try:
+            self.check_access(name, role)
+        except WriteRejected:
+            return False
+        return True
+
+    def check_access(self, name: str, role: Role) -> None:
+        """Raise WriteRejected if a client with `role` may not write the tag (whatever the value)."""
+        tag = self._tags.get(name)
+        if tag is None:
+            raise WriteRejected(name, Rule.UNKNOWN_TAG, "no such tag")
+        self._check_access(tag.definition, role)
+
+    @staticmethod
+    def _check_access(definition: TagDef, role: Role) -> None:
+        if definition.runtime_only:
+            raise WriteRejected(definition.name, Rule.READ_ONLY, "a diagnostic tag, written by the runtime only")
+        if not role.may_write:
+            raise WriteRejected(definition.name, Rule.ACCESS_DENIED, f"role {role.value} may not write")
+        if definition.access is Access.RO and not role.may_write_read_only:
+            raise WriteRejected(definition.name, Rule.READ_ONLY, "the tag is read-only for clients")
+
     # -- writing --------------------------------------------------------------------------
 
     def submit(
         self,
         items: Iterable[tuple[str, Any]],
-        source: str,
+        origin: Origin | str,
         *,
-        client: bool = True,
         quality: Quality = Quality.GOOD,
+        atomic: bool = False,
     ) -> list[WriteRejected | None]:
-        """Validate each (tag, value) and journal the valid ones; one result per item.
+        """Validate each (tag, value) for `origin` and journal the valid ones; one result per item.
 
         Journaled writes are applied by `apply_journal()` at the next cycle boundary, so a
-        scan never sees half of an external write.
+        scan never sees half of an external write. `atomic=True` journals nothing unless every
+        item is valid (a Modbus request); the valid items then answer with the first refusal.
+        A client's items (origin with a role) are reported to `on_write` listeners.
         """
+        origin = origin_of(origin)
+        items = list(items)
+        role = origin.role
+        accepted: list[Write] = []
         results: list[WriteRejected | None] = []
         for name, value in items:
             try:
-                coerced = self.validate(name, value, client=client)
+                coerced = self.validate(name, value, role=role)
             except WriteRejected as rejected:
                 results.append(rejected)
                 continue
-            self._journal.append(Write(name, coerced, source, quality))
+            accepted.append(Write(name, coerced, origin, quality))
             results.append(None)
+        if atomic and len(accepted) < len(items):
+            first = next(result for result in results if result is not None)
+            results = [result or WriteRejected(name, first.rule, f"not applied: {first}") for (name, _), result in zip(items, results)]
+            accepted = []
+        if self._write_callbacks and role is not None:
+            values = iter(accepted)
+            now = self._now()
+            events = []
+            for (name, value), result in zip(items, results):
+                tag = self._tags.get(name)
+                old = tag.value if tag is not None else None
+                if result is None:
+                    events.append(WriteEvent(now, origin, name, old, next(values).value))
+                else:
+                    events.append(WriteEvent(now, origin, name, old, value, result.rule, result.detail))
+            self._report(events)
+        self._journal.extend(accepted)
         return results
 
-    def submit_quality(self, names: Iterable[str], quality: Quality, source: str) -> None:
-        """Journal a quality change (the value stays) for the named tags."""
+    def refused(self, origin: Origin | str, name: str, value: Any, rule: Rule, detail: str) -> WriteRejected:
+        """Report a write an adapter refused before it reached `submit` (e.g. a protocol rule); returns it."""
+        origin = origin_of(origin)
+        if self._write_callbacks and origin.role is not None:
+            tag = self._tags.get(name)
+            self._report([WriteEvent(self._now(), origin, name, tag.value if tag is not None else None, value, rule, detail)])
+        return WriteRejected(name, rule, detail)
+
+    def submit_quality(self, names: Iterable[str], quality: Quality, origin: Origin | str) -> None:
+        """Journal a quality change (the value stays) for the named tags (drivers only)."""
+        origin = origin_of(origin)
         for name in names:
             tag = self._tags[name]
-            self._journal.append(Write(name, tag.value, source, quality))
+            self._journal.append(Write(name, tag.value, origin, quality))
 
     @property
     def journal_length(self) -> int:
@@ -202,6 +313,21 @@ class TagDatabase:
         """Call `callback(changed_tags)` after every applied batch; returns an unsubscribe."""
         self._callbacks.append(callback)
         return lambda: self._callbacks.remove(callback)
+
+    def on_write(self, callback: WriteCallback) -> Callable[[], None]:
+        """Call `callback(events)` for every client write, accepted or refused; returns an unsubscribe.
+
+        Called synchronously from `submit` on the event loop: keep it cheap (queue, don't write files).
+        """
+        self._write_callbacks.append(callback)
+        return lambda: self._write_callbacks.remove(callback)
+
+    def _report(self, events: list[WriteEvent]) -> None:
+        for callback in list(self._write_callbacks):
+            try:
+                callback(events)
+            except Exception:  # a broken listener must never refuse or lose a write
+                log.exception("write listener %r failed", callback)
 
     def _notify(self, changed: list[Tag]) -> None:
         if not changed:

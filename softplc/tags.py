@@ -38,6 +38,8 @@ class TagDef:
     max: float | None = None
     retain: bool = False
     group: str = ""
+    # Written by the runtime alone (diagnostic `_sys.` tags): no client may write it, whatever its role.
+    runtime_only: bool = False
     # Adapter-specific options (e.g. `modbus: {address: 100, scale: 10}`), validated by the
     # configuration schema and interpreted only by the adapter they belong to.
     options: dict[str, Any] = field(default_factory=dict, compare=False)

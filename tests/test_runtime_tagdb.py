@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from softplc.datatypes import DataType, TypeMismatch
-from softplc.tagdb import Rule, TagDatabase, WriteRejected
+from softplc.roles import Role
+from softplc.tagdb import Origin, Rule, TagDatabase, WriteRejected
 from softplc.tags import Access, Quality, TagDef
 
 
@@ -88,9 +89,9 @@ def test_validate_applies_every_rule() -> None:
     ]
     for name, value, client, rule, message in cases:
         with pytest.raises(WriteRejected) as raised:
-            db.validate(name, value, client=client)
+            db.validate(name, value)
         assert (raised.value.tag, raised.value.rule, str(raised.value)) == (name, rule, message)
-    assert db.validate("status", "ok", client=False) == "ok"  # programs may write ro tags
+    assert db.validate("status", "ok", role=None) == "ok"  # programs may write ro tags
 
 
 def test_submit_journals_valid_items_and_applies_them_together_in_order() -> None:
@@ -146,3 +147,74 @@ def test_snapshot_and_duplicates() -> None:
     assert len(db) == 4 and "level" in db and db.get("nope") is None
     with pytest.raises(ValueError):
         TagDatabase([TagDef("a", DataType.BOOL, False), TagDef("a", DataType.BOOL, False)], lambda: 0.0)
+
+
+def test_string_must_be_valid_unicode_text_on_every_path() -> None:
+    # asyncua decodes invalid UTF-8 with surrogateescape: b"\xff" arrives as "\udcff".
+    with pytest.raises(TypeMismatch, match="not valid UTF-8 text: invalid character at position 2"):
+        DataType.STRING.coerce("ok\udcff")
+    db = make_db()
+    [rejected] = db.submit([("status", "bad\udcff")], Origin("test", role=Role.ENGINEER))
+    assert rejected is not None and rejected.rule is Rule.TYPE_MISMATCH
+    with pytest.raises(WriteRejected):  # programs and drivers too: one rule for strings
+        db.validate("status", "\ud800", role=None)
+    assert db.validate("status", "Grüße 工場", role=None) == "Grüße 工場"
+
+
+def test_roles_decide_what_a_client_may_write() -> None:
+    db = TagDatabase(
+        [
+            TagDef("level", DataType.FLOAT32, 0.0),
+            TagDef("status", DataType.STRING, "", access=Access.RO),
+            TagDef("_sys.state", DataType.STRING, "", access=Access.RO, runtime_only=True),
+            TagDef("_sys.reset_faults", DataType.BOOL, False),
+        ],
+        lambda: 0.0,
+    )
+    expected = {
+        Role.VIEWER: {"level": Rule.ACCESS_DENIED, "status": Rule.ACCESS_DENIED, "_sys.state": Rule.READ_ONLY, "_sys.reset_faults": Rule.ACCESS_DENIED},
+        Role.OPERATOR: {"level": None, "status": Rule.READ_ONLY, "_sys.state": Rule.READ_ONLY, "_sys.reset_faults": None},
+        Role.ENGINEER: {"level": None, "status": None, "_sys.state": Rule.READ_ONLY, "_sys.reset_faults": None},
+    }
+    values = {"level": 1.0, "status": "x", "_sys.state": "RUNNING", "_sys.reset_faults": True}
+    for role, rules in expected.items():
+        results = db.submit(list(values.items()), Origin("test", role=role))
+        assert {name: (r.rule if r else None) for name, r in zip(values, results)} == rules, role
+        assert {name: db.writable(name, role) for name in values} == {name: rule is None for name, rule in rules.items()}
+    # Inside the runtime (drivers), no access rule applies except the type's.
+    assert db.submit([("status", "driven")], Origin("driver", role=None)) == [None]
+
+
+def test_write_listeners_see_every_client_write_with_its_origin() -> None:
+    db = make_db()
+    events: list = []
+    db.on_write(events.extend)
+    alice = Origin("hmi", user="alice", peer="127.0.0.1", role=Role.OPERATOR)
+    db.submit([("level", 10), ("count", -1), ("status", "x")], alice)
+    db.refused(alice, "level", "12", Rule.INVALID_REQUEST, "a quality was sent")
+    db.submit([("level", 11)], Origin("fleet:r01", role=None))  # inside the runtime: not reported
+    assert [(e.tag, e.old, e.new, e.rule, e.origin) for e in events] == [
+        ("level", 0.0, 10.0, None, alice),
+        ("count", 5, -1, Rule.TYPE_MISMATCH, alice),
+        ("status", "", "x", Rule.READ_ONLY, alice),
+        ("level", 0.0, "12", Rule.INVALID_REQUEST, alice),
+    ]
+    assert [e.accepted for e in events] == [True, False, False, False]
+    assert events[0].time == 100.0 and str(alice) == "hmi:alice@127.0.0.1"
+
+    def broken(_events: object) -> None:
+        raise RuntimeError("listener bug")
+
+    db.on_write(broken)  # a broken listener never refuses or loses a write
+    assert db.submit([("level", 12)], alice) == [None]
+    db.apply_journal()
+    assert db.value("level") == 12.0
+
+
+def test_atomic_submit_journals_all_or_nothing() -> None:
+    db = make_db()
+    results = db.submit([("level", 10), ("count", 70000), ("run", True)], "modbus", atomic=True)
+    assert [r.rule if r else None for r in results] == [Rule.TYPE_MISMATCH] * 3
+    assert "not applied" in str(results[0]) and db.apply_journal() == 0
+    assert db.submit([("level", 10), ("run", True)], "modbus", atomic=True) == [None, None]
+    assert db.apply_journal() == 2

@@ -26,7 +26,7 @@ from softplc.fleet.planning import ClockPlanning, Planning, ProcessPlanning
 from softplc.fleet.protocol import Registration, decode_report
 from softplc.fleet.robots import DriverKind, Pose, RobotFile, RobotSpec, load_robots
 from softplc.fleet.settings import FleetSettings
-from softplc.tagdb import TagDatabase
+from softplc.tagdb import Origin, TagDatabase
 from softplc.tags import Quality, Tag
 
 if TYPE_CHECKING:
@@ -74,7 +74,7 @@ class TagIO:
         self._goal_x, self._goal_y, self._status = (self.db[f"{robot_id}_{name}"] for name in COMMAND_TAGS)
         self._names = {name: f"{robot_id}_{name}" for name in (*PUBLISHED_TAGS, "status")}
         self._last: dict[str, Any] = {}
-        self.source = f"fleet:{robot_id}"
+        self.source = Origin(f"fleet:{robot_id}", role=None)
 
     def command(self) -> Command:
         return Command(self._goal_x.value, self._goal_y.value, bool(self._status.value))
@@ -94,7 +94,7 @@ class TagIO:
         if report.status is not None:
             items.append((names["status"], report.status))
         if items:
-            for rejected in self.db.submit(items, self.source, client=False):
+            for rejected in self.db.submit(items, self.source):
                 if rejected is not None:
                     log.warning("robot %s: %s", self.id, rejected)
 
@@ -115,14 +115,14 @@ class RemoteLink:
         self.rejected = 0
         self._status_seq: int | None = None
         self._published = [f"{spec.id}_{name}" for name in PUBLISHED_TAGS]
-        self.source = f"fleet:{spec.id}:remote"
+        self.source = Origin(f"fleet:{spec.id}:remote", role=None)
 
     def go_offline(self, why: str) -> None:
         if self.online:
             log.warning("remote robot %s is away (%s): its tags are BAD until it reports again", self.id, why)
         self.online = False
         self.db.submit_quality(self._published, Quality.BAD, self.source)
-        self.db.submit([(f"{self.id}_online", False)], self.source, client=False)
+        self.db.submit([(f"{self.id}_online", False)], self.source)
 
     def on_agent(self, text: str) -> None:
         if not text:
@@ -165,7 +165,7 @@ class RemoteLink:
         if report.status is not None and report.status_seq != self._status_seq:
             self._status_seq = report.status_seq
             items.append((f"{self.id}_status", report.status))
-        for rejected in self.db.submit(items, self.source, client=False):
+        for rejected in self.db.submit(items, self.source):
             if rejected is not None:
                 log.warning("robot %s: %s", self.id, rejected)
 
@@ -250,7 +250,7 @@ class FleetAdapter:
             planner = self.floor.planner(robot.radius)
             if planner not in planners:
                 planners.append(planner)
-        db.submit([(f"{robot.id}_radius", robot.radius) for robot in self.robots], "fleet", client=False)
+        db.submit([(f"{robot.id}_radius", robot.radius) for robot in self.robots], Origin("fleet", role=None))
         peers = SharedPeers(db, ids)
         self._cleanup.append(peers.unsubscribe)
         limits = {robot.id: self.limits(robot) for robot in self.robots}

@@ -1,9 +1,9 @@
 """The Modbus TCP adapter: serves the tag database through pymodbus 3.16 (SimDevice datastore).
 
 Reads return the tag database's current values (the register image is refreshed on every
-read). Writes are decoded per tag, validated with `db.validate` exactly like an OPC UA write,
-and only if every tag of the request is valid are they submitted with `db.submit` (applied at
-the next cycle boundary). Only the ten data function codes and FC43/14 device identification
+read). Writes are decoded per tag and submitted with `db.submit(..., atomic=True)`, validated
+exactly like an OPC UA write (Modbus clients write with the operator role): only if every tag of
+the request is valid are they journaled (applied at the next cycle boundary). Only the ten data function codes and FC43/14 device identification
 are served (functions.py); connections are capped and idle ones closed (connections.py).
 Exception codes (see docs/modbus.md):
 
@@ -36,7 +36,7 @@ from softplc.modbus.image import RegisterImage
 from softplc.modbus.requests import LIMITS, RequestGuard, guarded_requests
 from softplc.modbus.settings import ModbusSettings, settings_problems
 from softplc.runtime import AdapterError, Runtime
-from softplc.tagdb import Rule, TagDatabase, WriteRejected
+from softplc.tagdb import Origin, Rule, TagDatabase
 from softplc.yamlsource import ConfigError
 
 log = logging.getLogger(__name__)
@@ -48,11 +48,13 @@ EXCEPTION_FOR_RULE: dict[Rule, ExcCodes] = {
     Rule.READ_ONLY: ExcCodes.ILLEGAL_ADDRESS,
     Rule.TYPE_MISMATCH: ExcCodes.ILLEGAL_VALUE,
     Rule.OUT_OF_RANGE: ExcCodes.ILLEGAL_VALUE,
+    Rule.ACCESS_DENIED: ExcCodes.ILLEGAL_ADDRESS,
+    Rule.INVALID_REQUEST: ExcCodes.ILLEGAL_ADDRESS,
 }
 # The read that pymodbus does after FC5/FC6 builds the echo of the request: leave the
 # just-written words in place instead of refreshing them from the (not yet applied) tag.
 _ECHO_READS = (5, 6)
-WRITE_SOURCE = "modbus"
+WRITE_ORIGIN = Origin("modbus")
 
 
 class ModbusAdapter:
@@ -185,24 +187,22 @@ class ModbusAdapter:
         items: list[tuple[str, Any]] = []
         for mapping in mappings:
             if mapping.address < address or mapping.end > end:
-                log.debug("Modbus write %s %d..%d covers part of %s (%d..%d): rejected",
-                          table.value, address, end - 1, mapping.name, mapping.address, mapping.end - 1)
+                detail = f"the write {table.value} {address}..{end - 1} covers part of it ({mapping.address}..{mapping.end - 1})"
+                log.debug("Modbus write to %s refused: %s", mapping.name, detail)
+                db.refused(WRITE_ORIGIN, mapping.name, None, Rule.INVALID_REQUEST, detail)
                 return ExcCodes.ILLEGAL_ADDRESS
             words = values[mapping.address - address : mapping.end - address]
             try:
                 value = bool(words[0]) if mapping.codec is None else mapping.codec.decode(words)
             except CodecError as error:
-                log.debug("Modbus write to %s rejected: %s", mapping.name, error)
+                log.debug("Modbus write to %s refused: %s", mapping.name, error)
+                db.refused(WRITE_ORIGIN, mapping.name, list(words), Rule.TYPE_MISMATCH, str(error))
                 return ExcCodes.ILLEGAL_VALUE
-            try:
-                items.append((mapping.name, db.validate(mapping.name, value)))
-            except WriteRejected as rejected:
-                log.debug("Modbus write rejected: %s", rejected)
-                return EXCEPTION_FOR_RULE[rejected.rule]
-        # Everything was validated just now, with no await in between: submit cannot reject.
-        for result in db.submit(items, WRITE_SOURCE):
+            items.append((mapping.name, value))
+        # All of the request or nothing: one refused tag refuses the whole write.
+        for result in db.submit(items, WRITE_ORIGIN, atomic=True):
             if result is not None:
-                log.error("Modbus write rejected after validation: %s", result)
+                log.debug("Modbus write refused: %s", result)
                 return EXCEPTION_FOR_RULE[result.rule]
         return None
 

@@ -7,11 +7,11 @@ from softplc.lazy import lazy_exports
 if TYPE_CHECKING:
     from softplc.opcua.address_space import tag_node_id
     from softplc.opcua.client import ClientCertificate, ensure_client_certificate, make_client
-    from softplc.opcua.roles import Role
+    from softplc.roles import Role
     from softplc.opcua.security import Pki
     from softplc.opcua.server import OpcUaServer
     from softplc.opcua.settings import DEFAULT_NAMESPACE, OpcUaSettings
-    from softplc.opcua.users import UserStore
+    from softplc.users import UserStore
     from softplc.opcua.variants import variant_for
 
 # Public names and their modules, imported on first use (PEP 562): `softplc --help` imports
@@ -19,11 +19,11 @@ if TYPE_CHECKING:
 _MODULES = {
     "softplc.opcua.address_space": ("tag_node_id",),
     "softplc.opcua.client": ("ClientCertificate", "ensure_client_certificate", "make_client"),
-    "softplc.opcua.roles": ("Role",),
+    "softplc.roles": ("Role",),
     "softplc.opcua.security": ("Pki",),
     "softplc.opcua.server": ("OpcUaServer",),
     "softplc.opcua.settings": ("DEFAULT_NAMESPACE", "OpcUaSettings"),
-    "softplc.opcua.users": ("UserStore",),
+    "softplc.users": ("UserStore",),
     "softplc.opcua.variants": ("variant_for",),
 }
 __getattr__, __dir__ = lazy_exports(__name__, _MODULES)

@@ -8,15 +8,15 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from softplc.roles import ROLE_NAMES
 from softplc.yamlsource import load_yaml
 
 if TYPE_CHECKING:  # the rest of softplc.opcua needs asyncua: each command imports what it uses
     from softplc.opcua.security import Pki
     from softplc.opcua.settings import OpcUaSettings
-    from softplc.opcua.users import UserStore
+    from softplc.users import UserStore
 
 EXIT_OK, EXIT_FAILURE = 0, 1
-ROLE_NAMES = ("viewer", "operator", "engineer")  # = softplc.opcua.roles.ROLE_NAMES (a test keeps them equal)
 
 
 def add_commands(subparsers: Any) -> None:
@@ -108,7 +108,7 @@ def _pki(args: argparse.Namespace) -> Pki:
 
 
 def _store(args: argparse.Namespace) -> UserStore:
-    from softplc.opcua.users import UserStore
+    from softplc.users import UserStore
 
     settings, state_dir = _settings(args)
     return UserStore(settings.users_path(state_dir))  # a broken file raises ConfigError: FILE:LINE:COL
@@ -166,7 +166,7 @@ def cmd_untrust(args: argparse.Namespace) -> int:
 
 
 def cmd_users_add(args: argparse.Namespace) -> int:
-    from softplc.opcua.roles import Role
+    from softplc.roles import Role
     from softplc.opcua.security import der_bytes, fingerprint, load_certificate_file
 
     store = _store(args)
@@ -195,7 +195,7 @@ def cmd_users_add(args: argparse.Namespace) -> int:
 
 
 def _read_password(args: argparse.Namespace) -> str | None:
-    from softplc.opcua.users import MIN_PASSWORD_LENGTH
+    from softplc.users import MIN_PASSWORD_LENGTH
 
     if args.password_stdin:
         password = sys.stdin.readline().rstrip("\r\n")

@@ -30,7 +30,7 @@ from asyncua.ua.ua_binary import struct_from_binary
 from cryptography import x509
 
 from softplc.opcua.browsing import ContinuationPoints
-from softplc.opcua.peers import peer_host
+from softplc.peers import peer_host
 
 
 class PolicyRefused(Exception):

@@ -1,36 +1,19 @@
-"""Who may do what over OPC UA: the three roles and the session user that carries one.
+"""The OPC UA session user that carries a role (`softplc.roles`), and asyncua's service-level rules.
 
-- viewer: browse, read, subscribe. Every write → BadUserAccessDenied.
-- operator: as viewer, plus write `rw` tags. Writing an `ro` tag → BadNotWritable.
-- engineer: everything a client can do here: also writes `ro` tags (like forcing a value from a
-  PLC programming tool; the program or driver that owns the tag overwrites it the next time it
-  changes its output). Nobody may add or delete nodes or references.
+What each role may do is the core's (`softplc.roles`, enforced by `TagDatabase.validate`): the
+same for OPC UA, Modbus, the HMI and the CLI. Nobody may add or delete nodes or references.
 """
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 
 from asyncua import ua
 from asyncua.crypto.permission_rules import ADMIN_TYPES, USER_TYPES, PermissionRuleset, User, UserRole
 
+from softplc.roles import ROLE_NAMES, Role
 
-class Role(enum.Enum):
-    VIEWER = "viewer"
-    OPERATOR = "operator"
-    ENGINEER = "engineer"
-
-    @property
-    def may_write(self) -> bool:
-        return self is not Role.VIEWER
-
-    @property
-    def may_write_read_only(self) -> bool:
-        return self is Role.ENGINEER
-
-
-ROLE_NAMES: tuple[str, ...] = tuple(role.value for role in Role)
+__all__ = ["ROLE_NAMES", "Role", "RolePermissions", "SessionUser", "role_of"]
 
 
 @dataclass

@@ -15,7 +15,6 @@ certificate takes effect without a restart.
 from __future__ import annotations
 
 import datetime
-import hashlib
 import ipaddress
 import logging
 import os
@@ -31,22 +30,11 @@ from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
+from softplc.users import fingerprint, normalise_fingerprint
+
 log = logging.getLogger(__name__)
 
 CERT_VALID_DAYS = 5 * 365
-
-
-def fingerprint(der: bytes) -> str:
-    """SHA-256 fingerprint of a DER certificate as lowercase hex (64 characters)."""
-    return hashlib.sha256(der).hexdigest()
-
-
-def normalise_fingerprint(text: str) -> str:
-    """Accept 'AB:CD:…', 'sha256:abcd…' or a hex prefix; return lowercase hex without separators."""
-    text = text.strip().lower()
-    if text.startswith("sha256:"):
-        text = text[len("sha256:"):]
-    return re.sub(r"[^0-9a-f]", "", text)
 
 
 def load_certificate_file(path: Path) -> x509.Certificate:

@@ -39,7 +39,8 @@ from softplc.opcua.scheduling import ScanGuard
 from softplc.opcua.security import ClientCertificateValidator, Pki, SecuredChannels
 from softplc.opcua.settings import POLICIES, POLICY_NONE, POLICY_TEXT, OpcUaSettings
 from softplc.opcua.transport import ConnectionLimits, GuardedServer
-from softplc.opcua.users import SoftplcUserManager, UserStore
+from softplc.opcua.user_manager import SoftplcUserManager
+from softplc.users import UserStore
 from softplc.opcua.writes import MAX_NODES_PER_READ, MAX_NODES_PER_WRITE, TagAttributeService
 from softplc.yamlsource import ConfigError
 

@@ -7,8 +7,8 @@ session's Write goes through) by `TagAttributeService`, which answers each item 
 
     Good                      valid: journaled, applied at the next scan-cycle boundary
     BadNodeIdUnknown          no such node
-    BadNotWritable            a folder, a property, an attribute other than Value, or an
-                              `ro` tag written by an operator
+    BadNotWritable            a folder, a property, an attribute other than Value, an `ro`
+                              tag written by an operator, or a diagnostic `_sys.` tag
     BadUserAccessDenied       the session's role may not write (viewer, anonymous)
     BadTypeMismatch           wrong type (see `variants.value_from_variant` for the lossless
                               conversions accepted)
@@ -16,10 +16,15 @@ session's Write goes through) by `TagAttributeService`, which answers each item 
     BadWriteNotSupported      a StatusCode other than Good (clients cannot set quality)
     BadIndexRangeInvalid      an IndexRange (tags are scalars)
 
+The access rules are the tag database's (`TagDatabase.validate`, `softplc.roles`), the same for
+every protocol; each item of a Write is submitted with the session's `Origin` (user, role), so
+the database reports it, accepted or refused, to its write listeners (the audit trail).
+
 UserAccessLevel, as read by a client session, tells what *its* role may do (a PostRead hook,
 `TagAttributeService.user_access_level`): CurrentRead|CurrentWrite (3) on the tags the role may
-write — `rw` tags for an operator, every tag for an engineer — and CurrentRead (1) elsewhere
-(every tag for a viewer or an anonymous session; folders, properties and asyncua's nodes for all).
+write — `rw` tags for an operator, every tag but the diagnostic `_sys.` ones for an engineer — and
+CurrentRead (1) elsewhere (every tag for a viewer or an anonymous session; folders, properties
+and asyncua's nodes for all).
 
 Nothing of an invalid item is applied; valid items of the same Write are journaled together,
 so a scan sees all of them or none. The address space is never written here: it follows the
@@ -44,9 +49,10 @@ from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AddressSpace, AttributeService
 
-from softplc.opcua.roles import Role, role_of
+from softplc.opcua.roles import role_of
 from softplc.opcua.variants import WriteStatus, value_from_variant
-from softplc.tagdb import Rule, TagDatabase, WriteRejected
+from softplc.roles import Role
+from softplc.tagdb import Origin, Rule, TagDatabase, WriteRejected
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +68,12 @@ _RULE_CODES = {
     Rule.READ_ONLY: ua.StatusCodes.BadNotWritable,
     Rule.TYPE_MISMATCH: ua.StatusCodes.BadTypeMismatch,
     Rule.OUT_OF_RANGE: ua.StatusCodes.BadOutOfRange,
+    Rule.ACCESS_DENIED: ua.StatusCodes.BadUserAccessDenied,
+}
+_CODE_RULES = {
+    ua.StatusCodes.BadTypeMismatch: Rule.TYPE_MISMATCH,
+    ua.StatusCodes.BadOutOfRange: Rule.OUT_OF_RANGE,
+    ua.StatusCodes.BadNodeIdUnknown: Rule.UNKNOWN_TAG,
 }
 
 
@@ -93,8 +105,7 @@ class TagAttributeService(AttributeService):
             if stored is None or not isinstance(stored.Value, int):
                 continue  # no such node or attribute: keep the error status
             node_id = item.NodeId
-            tag = self.db.get(node_id.Identifier) if node_id.NamespaceIndex == self.ns and isinstance(node_id.Identifier, str) else None
-            writable = tag is not None and role.may_write and (tag.definition.writable_by_clients or role.may_write_read_only)
+            writable = node_id.NamespaceIndex == self.ns and isinstance(node_id.Identifier, str) and self.db.writable(node_id.Identifier, role)
             results[index] = _access_level(stored.Value | _CURRENT_WRITE if writable else stored.Value & ~_CURRENT_WRITE)
 
     async def write(self, params: ua.WriteParameters, user: User = User(role=UserRole.Admin)) -> list[ua.StatusCode]:
@@ -102,10 +113,10 @@ class TagAttributeService(AttributeService):
         if len(items) > MAX_NODES_PER_WRITE:
             raise ServiceError(ua.StatusCodes.BadTooManyOperations)
         role = role_of(user)
-        source = f"opcua:{getattr(user, 'name', None) or ('internal' if role is None else 'anonymous')}"
+        origin = Origin("opcua", getattr(user, "name", None) or ("internal" if role is None else "anonymous"), role=role)
         results: list[ua.StatusCode | None] = [None] * len(items)
-        normal: list[tuple[str, Any]] = []
-        forced: list[tuple[str, Any]] = []
+        batch: list[tuple[str, Any]] = []
+        batch_indexes: list[int] = []
         foreign: list[int] = []
         for index, item in enumerate(items):
             if index and index % _YIELD_EVERY == 0:
@@ -117,19 +128,28 @@ class TagAttributeService(AttributeService):
                     results[index] = self._not_ours(item.NodeId)
                 continue
             try:
-                name, value, force = self._check(item, role)
+                name, value = self._check(item, role)
             except WriteStatus as refused:
                 results[index] = ua.StatusCode(refused.code)
-                log.info("%s: write %s refused: %s", source, item.NodeId.Identifier, refused.detail)
+                rule = _CODE_RULES.get(refused.code, Rule.INVALID_REQUEST)
+                self.db.refused(origin, item.NodeId.Identifier, _variant_value(item), rule, refused.detail)
+                log.info("%s: write %s refused: %s", origin, item.NodeId.Identifier, refused.detail)
                 continue
-            (forced if force else normal).append((name, value))
-            results[index] = ua.StatusCode()
+            except WriteRejected as rejected:
+                results[index] = ua.StatusCode(_RULE_CODES[rejected.rule])
+                self.db.refused(origin, item.NodeId.Identifier, _variant_value(item), rejected.rule, rejected.detail)
+                log.info("%s: write %s refused: %s", origin, item.NodeId.Identifier, rejected.detail)
+                continue
+            batch.append((name, value))
+            batch_indexes.append(index)
         # Valid items of one request enter the journal together: one cycle applies all of them.
-        for batch, client in ((normal, True), (forced, False)):
-            if batch:
-                for rejected in self.db.submit(batch, source, client=client):
-                    if rejected is not None:  # validated above; kept as a guard
-                        log.error("%s: journal refused %s after validation", source, rejected)
+        if batch:
+            for index, rejected in zip(batch_indexes, self.db.submit(batch, origin)):
+                if rejected is None:
+                    results[index] = ua.StatusCode()
+                else:
+                    results[index] = ua.StatusCode(_RULE_CODES[rejected.rule])
+                    log.info("%s: write %s refused: %s", origin, rejected.tag, rejected.detail)
         for index in foreign:
             single = ua.WriteParameters(NodesToWrite=[items[index]])
             results[index] = (await super().write(single, user))[0]
@@ -143,8 +163,13 @@ class TagAttributeService(AttributeService):
             return ua.StatusCode(ua.StatusCodes.BadNotWritable)
         return ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
 
-    def _check(self, item: ua.WriteValue, role: Role | None) -> tuple[str, Any, bool]:
-        """(tag name, coerced value, forced) for a valid item, else raise WriteStatus."""
+    def _check(self, item: ua.WriteValue, role: Role | None) -> tuple[str, Any]:
+        """(tag name, value) of an item the database should judge, else raise WriteStatus or WriteRejected.
+
+        What the protocol alone decides (node, attribute, index range, quality, Variant type)
+        is checked here; access is checked first, so a viewer hears BadUserAccessDenied whatever
+        it sent. The value's range and the tag's type rules are the database's, in `submit`.
+        """
         name = item.NodeId.Identifier
         tag = self.db.get(name)
         if tag is None:
@@ -155,21 +180,18 @@ class TagAttributeService(AttributeService):
             raise WriteStatus(ua.StatusCodes.BadNotWritable, f"attribute {item.AttributeId} is not writable")
         if item.IndexRange:
             raise WriteStatus(ua.StatusCodes.BadIndexRangeInvalid, "tags are scalars; no IndexRange")
-        if role is not None and not role.may_write:
-            raise WriteStatus(ua.StatusCodes.BadUserAccessDenied, f"role {role.value} may not write")
-        definition = tag.definition
-        force = not definition.writable_by_clients
-        if force and role is not None and not role.may_write_read_only:
-            raise WriteStatus(ua.StatusCodes.BadNotWritable, "the tag is read-only")
+        if role is not None:
+            self.db.check_access(name, role)
         data = item.Value
         if data.StatusCode is not None and not data.StatusCode.is_good():
             raise WriteStatus(ua.StatusCodes.BadWriteNotSupported, "clients cannot write a tag's quality")
-        value = value_from_variant(definition, data.Value)
-        try:
-            value = self.db.validate(name, value, client=not force)
-        except WriteRejected as rejected:
-            raise WriteStatus(_RULE_CODES[rejected.rule], rejected.detail) from None
-        return name, value, force
+        return name, value_from_variant(tag.definition, data.Value)
+
+
+def _variant_value(item: ua.WriteValue) -> Any:
+    """What a refused item asked for, for the write listeners (None if it carried no value)."""
+    variant = item.Value.Value if item.Value is not None else None
+    return variant.Value if variant is not None else None
 
 
 _ACCESS_LEVELS: dict[int, ua.DataValue] = {}

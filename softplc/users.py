@@ -1,4 +1,6 @@
-"""OPC UA users: a YAML file of names, roles and salted password hashes, and the login check.
+"""Users: a YAML file of names, roles and salted password hashes (or certificate fingerprints).
+
+One users file serves every path that logs in: OPC UA sessions and the HMI.
 
 File format (written by `softplc users add/remove`; default `<state_dir>/users.yaml`):
 
@@ -7,11 +9,12 @@ File format (written by `softplc users add/remove`; default `<state_dir>/users.y
       robot7: {role: operator, certificate: "<SHA-256 fingerprint of its client certificate>"}
 
 Passwords are stored as scrypt hashes (passwords.py); they are checked off the event loop,
-throttled and remembered by logins.py, before asyncua asks `SoftplcUserManager.get_user`.
+throttled and remembered by logins.py (`PasswordLogins`), whichever server asks.
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import re
@@ -20,22 +23,30 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from asyncua.crypto.permission_rules import UserRole
-from asyncua.server.user_managers import UserManager
-
-from softplc.opcua.logins import PasswordLogins
-from softplc.opcua.passwords import SCRYPT_LOG2_N, hash_password, verify_password
-from softplc.opcua.roles import ROLE_NAMES, Role, SessionUser
-from softplc.opcua.security import fingerprint, normalise_fingerprint
+from softplc.passwords import SCRYPT_LOG2_N, hash_password, verify_password
+from softplc.roles import ROLE_NAMES, Role
 from softplc.yamlsource import ConfigError, load_yaml
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SoftplcUserManager", "UserEntry", "UserStore", "hash_password", "verify_password"]
+__all__ = ["UserEntry", "UserStore", "fingerprint", "hash_password", "normalise_fingerprint", "verify_password"]
 
 USER_NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.@-]{1,64}$")
 MIN_PASSWORD_LENGTH = 8
-HEADER = "# softplc OPC UA users. Manage with: softplc users add NAME --role ROLE | softplc users list | softplc users remove NAME\n"
+HEADER = "# softplc users (OPC UA and HMI). Manage with: softplc users add NAME --role ROLE | softplc users list | softplc users remove NAME\n"
+
+
+def fingerprint(der: bytes) -> str:
+    """SHA-256 fingerprint of a DER certificate as lowercase hex (64 characters)."""
+    return hashlib.sha256(der).hexdigest()
+
+
+def normalise_fingerprint(text: str) -> str:
+    """Accept 'AB:CD:…', 'sha256:abcd…' or a hex prefix; return lowercase hex without separators."""
+    text = text.strip().lower()
+    if text.startswith("sha256:"):
+        text = text[len("sha256:"):]
+    return re.sub(r"[^0-9a-f]", "", text)
 
 
 @dataclass(frozen=True)
@@ -177,44 +188,3 @@ def _parse(path: Path) -> dict[str, UserEntry]:
     if problems:
         raise ConfigError(problems)
     return users
-
-
-class SoftplcUserManager(UserManager):
-    """asyncua user manager: users file logins, certificate logins, optional anonymous viewer.
-
-    Never grants asyncua's Admin role, so AccessLevel and node management rules always apply.
-    A password login must have been decided by `check_password` (awaited by the transport
-    before asyncua activates the session); `get_user` never hashes on the event loop.
-    """
-
-    def __init__(self, store: UserStore, anonymous: Role | None) -> None:
-        self.store = store
-        self.anonymous = anonymous
-        self.logins = PasswordLogins(store)
-
-    async def check_password(self, peer: str, username: str, password: str) -> bool:
-        """Decide a password login from address `peer` off the event loop (throttled)."""
-        return await self.logins.check(peer, username, password)
-
-    def get_user(
-        self, iserver: Any, username: str | None = None, password: str | None = None, certificate: Any = None
-    ) -> SessionUser | None:
-        self.store.refresh()
-        if username:
-            entry = self.logins.decided(username, password or "")
-            if entry is None:
-                log.warning("OPC UA: login of %r refused: its password was not checked ahead", username)
-                return None
-            return SessionUser(role=UserRole.User, name=entry.name, access=entry.role)
-        if certificate:
-            # A certificate here was proven: either an X509 identity token's signature was
-            # checked, or it is the certificate of the secured channel the session runs on.
-            entry = self.store.by_certificate(bytes(certificate))
-            if entry is not None:
-                return SessionUser(role=UserRole.User, name=entry.name, access=entry.role)
-        if self.anonymous is not None:
-            return SessionUser(role=UserRole.User, name="anonymous", access=self.anonymous)
-        return None
-
-    def close(self) -> None:
-        self.logins.close()

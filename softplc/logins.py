@@ -37,11 +37,11 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from softplc.opcua.passwords import dummy_hash, verify_password
-from softplc.opcua.peers import PeerLog
+from softplc.passwords import dummy_hash, verify_password
+from softplc.peers import PeerLog
 
 if TYPE_CHECKING:
-    from softplc.opcua.users import UserEntry, UserStore
+    from softplc.users import UserEntry, UserStore
 
 log = logging.getLogger(__name__)
 
