@@ -2,7 +2,10 @@
 
 The core (tag database, scan engine, clock) knows nothing of protocols or robots; adapters
 (see `softplc.adapters`) are handed the runtime when they start and use only its public API:
-`runtime.db`, `runtime.clock`, `runtime.engine`, `runtime.spawn()`.
+`runtime.db` (values: snapshot, subscribe to changes, submit writes with an origin),
+`runtime.commands` (actions with an origin: reset faults, acknowledge alarms...),
+`runtime.events` (what happened: alarm transitions...), `runtime.clock`, `runtime.engine`,
+`runtime.spawn()`.
 """
 
 from __future__ import annotations
@@ -16,9 +19,11 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from softplc.clock import Clock, RealClock, SimClock
+from softplc.commands import Commands, Permission
 from softplc.config import PlantConfig
 from softplc.datatypes import TypeMismatch
 from softplc.durations import parse_duration
+from softplc.events import EventBus
 from softplc.expression import Condition
 from softplc.program import ProgramContext
 from softplc.retain import RetainStore
@@ -71,6 +76,10 @@ class Runtime:
         self.engine = ScanEngine(self.clock, self.db, self.tasks)
         self.engine.after_cycle(self._after_cycle)
         self.system_tags = SystemTags(self.db, self.engine, self._state_for_tags, self.reset_faults)
+        self.commands = Commands(self.clock.wall)
+        self.events = EventBus()
+        self.commands.register("runtime.reset_faults", lambda arguments, origin: self._reset_faults_command(),
+                               permission=Permission.ACKNOWLEDGE, description="reset program faults and the ERROR state")
         self.adapters: list[Adapter] = []
         self.state = RuntimeState.STARTING
         self.error = ""
@@ -135,6 +144,11 @@ class Runtime:
         if self.state is RuntimeState.ERROR:
             self.state = RuntimeState.RUNNING
             self.error = ""
+
+    def _reset_faults_command(self) -> str:
+        faulted = [i.name for t in self.tasks for i in t.programs if i.state is ProgramState.FAULTED]
+        self.reset_faults()
+        return f"reset {len(faulted)} faulted program(s)" + (f": {', '.join(faulted)}" if faulted else "")
 
     # -- lifecycle ------------------------------------------------------------------------
 

@@ -12,9 +12,12 @@ from typing import Any
 import pytest
 
 from softplc.clock import SimClock
+from softplc.commands import CommandRefused
 from softplc.config import load_config
 from softplc.expression import Condition
+from softplc.roles import Role
 from softplc.runtime import Runtime
+from softplc.tagdb import Origin
 from softplc.tags import Quality
 
 from conftest import REPO
@@ -78,6 +81,27 @@ async def test_a_raising_program_is_faulted_and_everything_else_keeps_scanning(s
         assert db.value("_sys.reset_faults") is False
         await clock.sleep_until(1.2)
         assert db.value("bomb_scans") == 11 + 20  # scanning again from the 1.01 s cycle
+    finally:
+        await runtime.stop()
+
+
+async def test_reset_faults_is_a_command_an_operator_may_call_and_a_viewer_may_not(sim_runtime) -> None:
+    runtime = sim_runtime(FAULTS)
+    calls: list[Any] = []
+    runtime.commands.on_call(calls.append)
+    await runtime.start()
+    try:
+        runtime.db.submit([("armed", True)], "test")
+        await runtime.clock.sleep_until(0.2)
+        assert runtime.program("bomb").state.value == "FAULTED"
+        runtime.db.submit([("armed", False)], "test")
+        await runtime.clock.sleep_until(0.3)
+        with pytest.raises(CommandRefused, match="role viewer may not reset program faults"):
+            await runtime.commands.call("runtime.reset_faults", {}, Origin("hmi", "vera", role=Role.VIEWER))
+        assert runtime.program("bomb").state.value == "FAULTED"
+        done = await runtime.commands.call("runtime.reset_faults", {}, Origin("hmi", "otto", role=Role.OPERATOR))
+        assert done == "reset 1 faulted program(s): bomb" and runtime.program("bomb").state.value == "RUNNING"
+        assert [(c.origin.user, c.accepted) for c in calls] == [("vera", False), ("otto", True)]
     finally:
         await runtime.stop()
 
