@@ -98,6 +98,28 @@ class DataType(enum.Enum):
         return result
 
 
+    def parse(self, text: str) -> Any:
+        """A value of this type from text a person typed (CLI, a form): `true`/`off`, `42`, `0.5`, `1e3`.
+
+        Raises TypeMismatch with what was expected. Strings are taken as they are.
+        """
+        if self is DataType.STRING:
+            return self.coerce(text)
+        word = text.strip()
+        if self is DataType.BOOL:
+            lowered = word.lower()
+            if lowered in ("true", "1", "on", "yes"):
+                return True
+            if lowered in ("false", "0", "off", "no"):
+                return False
+            raise TypeMismatch(f"expected bool (true/false, 1/0, on/off), got {text!r}")
+        try:
+            number: int | float = int(word) if self.is_integer and word.lstrip("+-").isdigit() else float(word)
+        except ValueError:
+            raise TypeMismatch(f"expected {self.value}, got {text!r}") from None
+        return self.coerce(number)
+
+
 _INT_RANGES: dict[DataType, tuple[int, int]] = {
     DataType.INT16: (-(2**15), 2**15 - 1),
     DataType.UINT16: (0, 2**16 - 1),

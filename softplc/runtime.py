@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from softplc.clock import Clock, RealClock, SimClock
-from softplc.commands import Commands, Permission
+from softplc.commands import Commands
 from softplc.config import PlantConfig
 from softplc.datatypes import TypeMismatch
 from softplc.durations import parse_duration
@@ -27,11 +27,11 @@ from softplc.events import EventBus
 from softplc.expression import Condition
 from softplc.program import ProgramContext
 from softplc.retain import RetainStore
+from softplc.runtime_commands import register_runtime_commands
 from softplc.scan import ProgramInstance, ProgramState, ScanEngine, Task
 from softplc.stall import StallDetector
 from softplc.systags import SystemTags, system_tag_definitions
 from softplc.tagdb import TagDatabase
-from softplc.tags import Tag
 from softplc.yamlsource import ConfigError, Location, Problem
 
 log = logging.getLogger(__name__)
@@ -78,8 +78,7 @@ class Runtime:
         self.system_tags = SystemTags(self.db, self.engine, self._state_for_tags, self.reset_faults)
         self.commands = Commands(self.clock.wall)
         self.events = EventBus()
-        self.commands.register("runtime.reset_faults", lambda arguments, origin: self._reset_faults_command(),
-                               permission=Permission.ACKNOWLEDGE, description="reset program faults and the ERROR state")
+        register_runtime_commands(self)
         self.adapters: list[Adapter] = []
         self.state = RuntimeState.STARTING
         self.error = ""
@@ -92,7 +91,7 @@ class Runtime:
         self._retain_enabled = retain
         self.running = asyncio.Event()  # set once every adapter has started and scanning begins
         self.started_at: float | None = None  # clock time when scanning began
-        self._retain_dirty: dict[str, Tag] = {}
+        self._retain_dirty: dict[str, tuple[str, Any]] = {}  # tag → (type name, value) to save
         self._started = False
         self._drive: asyncio.Task[Any] | None = None
 
@@ -144,11 +143,6 @@ class Runtime:
         if self.state is RuntimeState.ERROR:
             self.state = RuntimeState.RUNNING
             self.error = ""
-
-    def _reset_faults_command(self) -> str:
-        faulted = [i.name for t in self.tasks for i in t.programs if i.state is ProgramState.FAULTED]
-        self.reset_faults()
-        return f"reset {len(faulted)} faulted program(s)" + (f": {', '.join(faulted)}" if faulted else "")
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -207,6 +201,9 @@ class Runtime:
         for adapter in reversed(self.adapters):
             await _quietly(adapter.stop(), adapter.name)
         await self._cancel_background()
+        if self.db.forces:
+            log.warning("%d forced tag(s) released by the stop (forces are not retained): %s",
+                        len(self.db.forces), ", ".join(force.tag for force in self.db.forces.active()))
         self._flush_retained()
         if self._retain is not None:
             self._retain.close()
@@ -310,8 +307,10 @@ class Runtime:
 
     def _note_retained(self, changed: Any) -> None:
         for tag in changed:
-            if tag.definition.retain:
-                self._retain_dirty[tag.name] = tag
+            if tag.definition.retain and not tag.forced:  # forces are not retained (softplc/forcing.py)
+                # The value now, on the loop thread: the saving thread never reads a changing tag,
+                # and a force applied later never reaches the store.
+                self._retain_dirty[tag.name] = (tag.definition.type.value, tag.value)
 
     def _flush_retained(self) -> None:
         """Save retained changes now (at shutdown)."""
@@ -319,7 +318,7 @@ class Runtime:
             return
         dirty, self._retain_dirty = self._retain_dirty, {}
         try:
-            self._retain.save(_retained_values(dirty))
+            self._retain.save(dirty)
         except Exception as error:
             log.error("cannot save retained values to %s: %s", self._retain.path, error)
             self._retain_dirty = {**dirty, **self._retain_dirty}
@@ -330,15 +329,10 @@ class Runtime:
             return
         dirty, self._retain_dirty = self._retain_dirty, {}
         try:
-            await self.clock.run_blocking(self._retain.save, _retained_values(dirty))
+            await self.clock.run_blocking(self._retain.save, dirty)
         except Exception as error:
             log.error("cannot save retained values to %s: %s", self._retain.path, error)
             self._retain_dirty = {**dirty, **self._retain_dirty}  # newer changes win
-
-
-def _retained_values(tags: dict[str, Tag]) -> dict[str, tuple[str, Any]]:
-    # Taken on the loop thread, so the saving thread never reads a tag while it changes.
-    return {name: (tag.definition.type.value, tag.value) for name, tag in tags.items()}
 
 
 async def _quietly(coroutine: Coroutine[Any, Any, Any], name: str) -> None:

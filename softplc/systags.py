@@ -24,6 +24,7 @@ RESET_FAULTS = SYSTEM_PREFIX + "reset_faults"
 STATE = SYSTEM_PREFIX + "state"
 ERROR = SYSTEM_PREFIX + "error"
 TIME = SYSTEM_PREFIX + "time"
+FORCED = SYSTEM_PREFIX + "forced"
 
 
 def _tag(name: str, data_type: DataType, description: str, *, unit: str = "", access: Access = Access.RO, group: str = "_sys") -> TagDef:
@@ -38,6 +39,7 @@ def system_tag_definitions(tasks: list[TaskConfig]) -> list[TagDef]:
         _tag(STATE, DataType.STRING, "runtime state: RUNNING, ERROR, STOPPING"),
         _tag(ERROR, DataType.STRING, "last runtime error (empty when none)"),
         _tag(TIME, DataType.FLOAT64, "runtime clock (simulated under --sim)", unit="s"),
+        _tag(FORCED, DataType.UINT32, "number of forced tags"),
         _tag(RESET_STATS, DataType.BOOL, "write true to reset all timing statistics", access=Access.RW),
         _tag(RESET_FAULTS, DataType.BOOL, "write true to clear program faults and the ERROR state", access=Access.RW),
     ]
@@ -84,6 +86,7 @@ class SystemTags:
         values[STATE] = state
         values[ERROR] = error
         values[TIME] = float(now)
+        values[FORCED] = len(db.forces)
         for task in self.engine.tasks:
             prefix = f"{SYSTEM_PREFIX}{task.name}."
             stats = task.stats

@@ -9,7 +9,8 @@ this API:
   are journaled and applied at the next cycle boundary;
 - be told of changes (`db.on_change(callback)`), called after each batch is applied;
 - be told of every client write, accepted or refused, with its origin (`db.on_write(callback)`):
-  the one place an audit trail or a write log listens, so no adapter keeps its own.
+  the one place an audit trail or a write log listens, so no adapter keeps its own;
+- force and unforce tags (`db.force`, `db.unforce`, `db.forces`; see `softplc/forcing.py`).
 
 Programs' outputs are committed by the scan engine with `db.commit(...)`.
 """
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from softplc.datatypes import TypeMismatch
+from softplc.forcing import ForceChange, Forces
 from softplc.roles import Role
 from softplc.tags import Access, Quality, Tag, TagDef
 
@@ -38,6 +40,7 @@ class Rule(enum.Enum):
     OUT_OF_RANGE = "out of range"
     ACCESS_DENIED = "access denied"  # the writer's role may not write at all (a viewer)
     INVALID_REQUEST = "invalid request"  # refused by the protocol before any tag rule (e.g. a quality, an index range)
+    FORCED = "forced"  # the tag is forced by an engineer: unforce it first
 
 
 class WriteRejected(Exception):
@@ -121,9 +124,10 @@ class TagDatabase:
             if definition.name in self._tags:
                 raise ValueError(f"duplicate tag {definition.name!r}")
             self._tags[definition.name] = Tag(definition, start)
-        self._journal: list[Write] = []
+        self._journal: list[Write | ForceChange] = []
         self._callbacks: list[ChangeCallback] = []
         self._write_callbacks: list[WriteCallback] = []
+        self.forces = Forces()
 
     # -- reading --------------------------------------------------------------------------
 
@@ -169,6 +173,8 @@ class TagDatabase:
         definition = tag.definition
         if role is not None:
             self._check_access(definition, role)
+            if name in self.forces:
+                raise WriteRejected(name, Rule.FORCED, "the tag is forced; unforce it first")
         try:
             coerced = definition.type.coerce(value)
         except TypeMismatch as error:
@@ -270,18 +276,52 @@ class TagDatabase:
             tag = self._tags[name]
             self._journal.append(Write(name, tag.value, origin, quality))
 
+    def force(self, name: str, value: Any, origin: Origin | str) -> Any:
+        """Force a tag to `value` from the next cycle boundary on; returns the coerced value.
+
+        Raises WriteRejected for an unknown tag, a diagnostic tag, or a value that breaks the
+        tag's type or range (a force is a value the process may have). Who may force is decided
+        by the caller (the `tags.force` command needs the engineer role).
+        """
+        tag = self._tags.get(name)
+        if tag is None:
+            raise WriteRejected(name, Rule.UNKNOWN_TAG, "no such tag")
+        if tag.definition.runtime_only:
+            raise WriteRejected(name, Rule.READ_ONLY, "a diagnostic tag, written by the runtime only, cannot be forced")
+        coerced = self.validate(name, value, role=None)
+        self.forces.note_request(name)
+        self._journal.append(ForceChange(name, True, coerced, origin_of(origin), self._now()))
+        return coerced
+
+    def unforce(self, name: str, *, restore: bool = False) -> bool:
+        """Release a forced tag at the next cycle boundary (`restore`: back to its value before the force)."""
+        if name not in self.forces and not self.forces.requested(name):
+            return False
+        self.forces.note_request(name)
+        self._journal.append(ForceChange(name, False, restore=restore))
+        return True
+
     @property
     def journal_length(self) -> int:
         return len(self._journal)
 
     def apply_journal(self) -> int:
-        """Apply every journaled write in arrival order; return how many were applied."""
+        """Apply forces, then every journaled write in arrival order; return how many were applied.
+
+        Writes to a forced tag are dropped (a driver's; a client's was refused when submitted).
+        """
         if not self._journal:
             return 0
         journal, self._journal = self._journal, []
         now = self._now()
         changed: dict[str, Tag] = {}
+        forces = self.forces
         for write in journal:
+            if type(write) is ForceChange:
+                self._apply_force(write, now, changed)
+                continue
+            if write.tag in forces:
+                continue
             tag = self._tags[write.tag]
             # A journaled value was valid when submitted; the tag cannot change type since.
             if tag.value != write.value or tag.quality is not write.quality or type(tag.value) is not type(write.value):
@@ -292,12 +332,33 @@ class TagDatabase:
         self._notify(list(changed.values()))
         return len(journal)
 
+    def _apply_force(self, change: ForceChange, now: float, changed: dict[str, Tag]) -> None:
+        tag = self._tags[change.tag]
+        released = self.forces.apply(change, tag.value)
+        if change.force:
+            tag.forced = True
+            tag.value = change.value
+        elif released is not None:
+            tag.forced = False
+            if change.restore:
+                tag.value = released.previous
+        else:
+            return
+        tag.timestamp = now
+        changed[change.tag] = tag
+
     def commit(self, values: Mapping[str, Any]) -> list[Tag]:
-        """Apply already-validated values (a scan's outputs) at once; return the changed tags."""
+        """Apply already-validated values (a scan's outputs) at once; return the changed tags.
+
+        Outputs to forced tags are dropped: the forced value stands.
+        """
         now = self._now()
         changed: list[Tag] = []
         tags = self._tags
+        forces = self.forces
         for name, value in values.items():
+            if forces and name in forces:
+                continue
             tag = tags[name]
             if tag.value != value or tag.quality is not Quality.GOOD or type(tag.value) is not type(value):
                 tag.value = value

@@ -52,17 +52,18 @@ class TagDef:
 class Tag:
     """A tag's declaration and its current state. Only TagDatabase changes the state."""
 
-    __slots__ = ("definition", "value", "quality", "timestamp")
+    __slots__ = ("definition", "value", "quality", "timestamp", "forced")
 
     def __init__(self, definition: TagDef, timestamp: float) -> None:
         self.definition = definition
         self.value: Any = definition.initial
         self.quality = Quality.GOOD
         self.timestamp = timestamp
+        self.forced = False  # pinned by an engineer (softplc/forcing.py): adapters show it
 
     @property
     def name(self) -> str:
         return self.definition.name
 
     def __repr__(self) -> str:
-        return f"<Tag {self.name}={self.value!r} {self.quality.value}>"
+        return f"<Tag {self.name}={self.value!r} {self.quality.value}{' forced' if self.forced else ''}>"

@@ -218,3 +218,22 @@ def test_atomic_submit_journals_all_or_nothing() -> None:
     assert "not applied" in str(results[0]) and db.apply_journal() == 0
     assert db.submit([("level", 10), ("run", True)], "modbus", atomic=True) == [None, None]
     assert db.apply_journal() == 2
+
+
+@pytest.mark.parametrize(
+    ("data_type", "text", "expected"),
+    [(DataType.BOOL, "on", True), (DataType.BOOL, "False", False), (DataType.INT16, " -42 ", -42),
+     (DataType.UINT16, "3.0", 3), (DataType.FLOAT32, "1e3", 1000.0), (DataType.STRING, " as typed ", " as typed ")],
+)
+def test_parse_reads_what_a_person_typed(data_type: DataType, text: str, expected: object) -> None:
+    assert data_type.parse(text) == expected and type(data_type.parse(text)) is type(expected)
+
+
+@pytest.mark.parametrize(
+    ("data_type", "text", "message"),
+    [(DataType.BOOL, "maybe", "expected bool (true/false, 1/0, on/off), got 'maybe'"),
+     (DataType.INT16, "12abc", "expected int16, got '12abc'"), (DataType.UINT16, "-1", "-1 does not fit in uint16 (0..65535)")],
+)
+def test_parse_refuses_what_is_not_a_value_of_the_type(data_type: DataType, text: str, message: str) -> None:
+    with pytest.raises(TypeMismatch, match=message.replace("(", r"\(").replace(")", r"\)")):
+        data_type.parse(text)
