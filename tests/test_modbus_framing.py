@@ -129,6 +129,18 @@ async def test_pipelined_requests_are_all_answered_in_order(plant):
         writer.close()
 
 
+async def test_a_client_far_ahead_of_the_answers_is_paused_not_dropped(plant):
+    # 600 requests (7.2 kB) at once: reading pauses beyond 16 frames and resumes as answers go out.
+    reader, writer = await asyncio.open_connection("127.0.0.1", plant.port)
+    try:
+        writer.write(b"".join(read_counter(plant, transaction) for transaction in range(600)))
+        await writer.drain()
+        answers = await asyncio.wait_for(reader.readexactly(600 * 13), 10.0)
+        assert [int.from_bytes(answers[i : i + 2], "big") for i in range(0, len(answers), 13)] == list(range(600))
+    finally:
+        writer.close()
+
+
 async def test_a_frame_split_across_packets_is_answered(plant):
     reader, writer = await asyncio.open_connection("127.0.0.1", plant.port)
     try:
