@@ -2,9 +2,11 @@
 
 Reads return the tag database's current values (the register image is refreshed on every
 read). Writes are decoded per tag and submitted with `db.submit(..., atomic=True)`, validated
-exactly like an OPC UA write (Modbus clients write with the operator role): only if every tag of
-the request is valid are they journaled (applied at the next cycle boundary). Only the ten data function codes and FC43/14 device identification
-are served (functions.py); connections are capped and idle ones closed (connections.py).
+exactly like an OPC UA write (Modbus clients write with the operator role, their Origin names
+the connection's host:port): only if every tag of the request is valid are they journaled
+(applied at the next cycle boundary). Only the ten data function codes and FC43/14 device
+identification are served (functions.py); the connections frame the byte stream, are capped
+and closed when idle or on a framing error (connections.py, framing.py).
 Exception codes (see docs/modbus.md):
 
     01 illegal function      a function code softplc does not serve
