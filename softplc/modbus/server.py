@@ -123,7 +123,7 @@ class ModbusAdapter:
             await server.shutdown()
 
     def connections(self) -> ConnectionCounts:
-        """Open client connections, and how many were refused or closed for idleness."""
+        """Open client connections, and how many were refused, closed for idleness or for a framing error."""
         if self._server is None:
             return ConnectionCounts(0, 0, 0, 0)
         return self._server.counts
