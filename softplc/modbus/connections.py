@@ -216,7 +216,8 @@ class _Connection(ServerRequestHandler):
         if self.transport is None or self._worker is not None or not len(self._frames):
             return
         timeout = self._plc_server.frame_timeout
-        self._framing_error(f"an incomplete frame ({self._frames.describe_partial()}) for {timeout:g} s", "incomplete frame")
+        reason = f"an incomplete frame ({self._frames.describe_partial()}) for {timeout:g} s"
+        self._framing_error(reason, "incomplete frame")
 
     def _cancel_frame_timer(self) -> None:
         if self._frame_timer is not None:
@@ -271,7 +272,8 @@ class PlcTcpServer(ModbusTcpServer):
 
     @property
     def counts(self) -> ConnectionCounts:
-        return ConnectionCounts(len(self.active_connections), self.refusal_report.total, self.idle_report.total, self.framing_errors)
+        return ConnectionCounts(len(self.active_connections), self.refusal_report.total, self.idle_report.total,
+                                self.framing_errors)
 
     def handle_new_connection(self) -> Any:
         """asyncio's protocol factory for each accepted socket: refuse beyond the cap."""

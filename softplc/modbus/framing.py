@@ -71,7 +71,8 @@ class FrameBuffer:
             return None
         length = int.from_bytes(data[4:6], "big")
         if not MIN_LENGTH <= length <= MAX_LENGTH:
-            raise FramingError("length", f"length field {length} in the MBAP header (a request has {MIN_LENGTH}..{MAX_LENGTH})")
+            raise FramingError("length",
+                               f"length field {length} in the MBAP header (a request has {MIN_LENGTH}..{MAX_LENGTH})")
         end = 6 + length
         if len(data) < end:
             return None
