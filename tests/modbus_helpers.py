@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import re
+import shutil
 import struct
 import textwrap
 import time
@@ -11,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
 from softplc.clock import RealClock
@@ -100,6 +103,19 @@ async def raw_request(port: int, frame: bytes, timeout: float = 2.0) -> bytes:
         return header + await asyncio.wait_for(reader.readexactly(length), timeout)
     finally:
         writer.close()
+
+
+def mbpoll_path() -> str:
+    """The mbpoll executable (Debian package), or a failed test saying how to install it."""
+    path = shutil.which("mbpoll")
+    if path is None:
+        pytest.fail("mbpoll is not installed: run scripts/install-test-tools.sh (apt-get install -y mbpoll)")
+    return path
+
+
+def polled(output: str) -> dict[int, str]:
+    """mbpoll's '[ref]: value' lines."""
+    return {int(ref): value for ref, value in re.findall(r"^\[(\d+)\]:\s+(\S+)", output, re.MULTILINE)}
 
 
 def mbap(transaction: int, unit: int, pdu: bytes) -> bytes:

@@ -142,9 +142,11 @@ async def test_a_multi_tag_write_with_one_bad_tag_applies_nothing(plant):
         ("FC2 quantity 0", struct.pack(">BHH", 2, 0, 0), 2),
         ("FC5 value 0x1234", struct.pack(">BHH", 5, 0, 0x1234), 5),
         ("FC15 byte count too small", struct.pack(">BHHB", 15, 0, 9, 1) + b"\x01", 15),
-        ("FC16 quantity 124", struct.pack(">BHHB", 16, 0, 124, 248) + b"\0" * 248, 16),
+        # 124 registers do not fit in a Modbus TCP frame (253-byte PDU): the largest legal frame
+        # announcing them is answered 03; a longer one is a framing error (test_modbus_framing).
+        ("FC16 quantity 124", struct.pack(">BHHB", 16, 0, 124, 248) + b"\0" * 247, 16),
         ("FC16 byte count mismatch", struct.pack(">BHHB", 16, 0, 2, 2) + b"\0\x01", 16),
-        ("FC23 write quantity 122", struct.pack(">BHHHHB", 23, 0, 1, 0, 122, 244) + b"\0" * 244, 23),
+        ("FC23 write quantity 122", struct.pack(">BHHHHB", 23, 0, 1, 0, 122, 244) + b"\0" * 243, 23),
     ],
 )
 async def test_malformed_quantities_get_the_function_exception_03(plant, name, pdu, function):

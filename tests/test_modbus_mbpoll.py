@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -15,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from conftest import REPO
+from modbus_helpers import mbpoll_path, polled
 
 PLANT = """
 version: 1
@@ -35,13 +35,6 @@ servers:
 UNIT = "5"
 
 
-def mbpoll_path() -> str:
-    path = shutil.which("mbpoll")
-    if path is None:
-        pytest.fail("mbpoll is not installed: run scripts/install-test-tools.sh (apt-get install -y mbpoll)")
-    return path
-
-
 class Softplc:
     """`softplc run CONFIG --modbus-port 0` in a subprocess; knows the port it announced."""
 
@@ -55,11 +48,6 @@ class Softplc:
         command = [mbpoll_path(), "-m", "tcp", "-a", unit, "-p", str(self.port), "-1", "-o", "2", *arguments]
         done = subprocess.run(command, capture_output=True, text=True, timeout=15)
         return done.returncode, done.stdout + done.stderr
-
-
-def polled(output: str) -> dict[int, str]:
-    """mbpoll's '[ref]: value' lines."""
-    return {int(ref): value for ref, value in re.findall(r"^\[(\d+)\]:\s+(\S+)", output, re.MULTILINE)}
 
 
 @pytest.fixture(scope="module")

@@ -2,9 +2,11 @@
 
 Reads return the tag database's current values (the register image is refreshed on every
 read). Writes are decoded per tag and submitted with `db.submit(..., atomic=True)`, validated
-exactly like an OPC UA write (Modbus clients write with the operator role): only if every tag of
-the request is valid are they journaled (applied at the next cycle boundary). Only the ten data function codes and FC43/14 device identification
-are served (functions.py); connections are capped and idle ones closed (connections.py).
+exactly like an OPC UA write (Modbus clients write with the operator role, their Origin names
+the connection's host:port): only if every tag of the request is valid are they journaled
+(applied at the next cycle boundary). Only the ten data function codes and FC43/14 device
+identification are served (functions.py); the connections frame the byte stream, are capped
+and closed when idle or on a framing error (connections.py, framing.py).
 Exception codes (see docs/modbus.md):
 
     01 illegal function      a function code softplc does not serve
@@ -29,7 +31,7 @@ from softplc.config import PlantConfig
 from softplc.modbus.address_map import AddressMap, Table, build_address_map
 from softplc.modbus.codec import CodecError
 from softplc.modbus import lognoise
-from softplc.modbus.connections import ConnectionCounts, PlcTcpServer
+from softplc.modbus.connections import ConnectionCounts, PlcTcpServer, request_peer
 from softplc.modbus.functions import RequestDecoder
 from softplc.modbus.identification import device_objects, identification_request
 from softplc.modbus.image import RegisterImage
@@ -54,7 +56,6 @@ EXCEPTION_FOR_RULE: dict[Rule, ExcCodes] = {
 # The read that pymodbus does after FC5/FC6 builds the echo of the request: leave the
 # just-written words in place instead of refreshing them from the (not yet applied) tag.
 _ECHO_READS = (5, 6)
-WRITE_ORIGIN = Origin("modbus")
 
 
 class ModbusAdapter:
@@ -122,9 +123,9 @@ class ModbusAdapter:
             await server.shutdown()
 
     def connections(self) -> ConnectionCounts:
-        """Open client connections, and how many were refused or closed for idleness."""
+        """Open client connections, and how many were refused, closed for idleness or for a framing error."""
         if self._server is None:
-            return ConnectionCounts(0, 0, 0)
+            return ConnectionCounts(0, 0, 0, 0)
         return self._server.counts
 
     def describe(self) -> str:
@@ -180,6 +181,7 @@ class ModbusAdapter:
         """Validate every tag the write covers; submit them all, or nothing."""
         assert self._db is not None
         db = self._db
+        origin = Origin("modbus", peer=request_peer.get())  # the connection's "host:port", for the audit trail
         end = address + len(values)
         mappings = self.map.covering(table, address, len(values))
         if mappings is None:
@@ -189,18 +191,18 @@ class ModbusAdapter:
             if mapping.address < address or mapping.end > end:
                 detail = f"the write {table.value} {address}..{end - 1} covers part of it ({mapping.address}..{mapping.end - 1})"
                 log.debug("Modbus write to %s refused: %s", mapping.name, detail)
-                db.refused(WRITE_ORIGIN, mapping.name, None, Rule.INVALID_REQUEST, detail)
+                db.refused(origin, mapping.name, None, Rule.INVALID_REQUEST, detail)
                 return ExcCodes.ILLEGAL_ADDRESS
             words = values[mapping.address - address : mapping.end - address]
             try:
                 value = bool(words[0]) if mapping.codec is None else mapping.codec.decode(words)
             except CodecError as error:
                 log.debug("Modbus write to %s refused: %s", mapping.name, error)
-                db.refused(WRITE_ORIGIN, mapping.name, list(words), Rule.TYPE_MISMATCH, str(error))
+                db.refused(origin, mapping.name, list(words), Rule.TYPE_MISMATCH, str(error))
                 return ExcCodes.ILLEGAL_VALUE
             items.append((mapping.name, value))
         # All of the request or nothing: one refused tag refuses the whole write.
-        for result in db.submit(items, WRITE_ORIGIN, atomic=True):
+        for result in db.submit(items, origin, atomic=True):
             if result is not None:
                 log.debug("Modbus write refused: %s", result)
                 return EXCEPTION_FOR_RULE[result.rule]
