@@ -128,13 +128,18 @@ class Runtime:
             self._stop_event.set()
 
     def reset_faults(self) -> None:
-        for task in self.tasks:
-            for instance in task.programs:
-                if instance.state is ProgramState.FAULTED:
-                    instance.reset(self.clock.now())
+        """Clear the ERROR state and restart every FAULTED program (`_sys.reset_faults`)."""
+        # Cleared first: a setup() that stalls during this very reset puts the runtime back in ERROR.
         if self.state is RuntimeState.ERROR:
             self.state = RuntimeState.RUNNING
             self.error = ""
+        now = self.clock.now()
+        for task in self.tasks:
+            for instance in task.programs:
+                if instance.state is ProgramState.FAULTED:
+                    # Outside any cycle, yet watched like one: a setup() that blocks is named.
+                    self.engine.run_setup(task, instance, lambda instance=instance: instance.reset(now))
+                    self._apply_stall()
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -148,7 +153,11 @@ class Runtime:
             self._stop_event.set()
         if self._retain_enabled:
             self._load_retained()
+        # Watching from before the first setup(): one that blocks at start-up is named too.
+        self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after())
+        self._stall_detector.start()
         self.engine.start_programs()
+        self._apply_stall()
         self.system_tags.publish(self.clock.now())
         started: list[Adapter] = []
         try:
@@ -159,8 +168,11 @@ class Runtime:
             for adapter in reversed(started):
                 await _quietly(adapter.stop(), adapter.name)
             await self._cancel_background()
+            if self._stall_detector is not None:
+                self._stall_detector.stop()
             raise
-        self.state = RuntimeState.RUNNING
+        if self.state is RuntimeState.STARTING:  # not ERROR: a stalled setup() stays visible
+            self.state = RuntimeState.RUNNING
         if not self.clock.simulated:
             # What exists now (tags, programs, servers' address spaces, maps) lives as long as
             # the runtime. A full collection walks every object it tracks — 10-20 ms with the
@@ -173,8 +185,6 @@ class Runtime:
             self._drive = self.spawn(self.clock.drive(), "sim-clock")
         self.spawn(self.engine.run(), "scan-engine")
         self.spawn(self._housekeeping(), "housekeeping")
-        self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after())
-        self._stall_detector.start()
         self.started_at = self.clock.now()
         self.running.set()
 
@@ -241,11 +251,20 @@ class Runtime:
 
     def _after_cycle(self, task: Task) -> None:
         if self._stall is not None:
-            stalled_task, program, message = self._stall
-            self._stall = None
-            for instance in stalled_task.programs:
-                if instance.name == program and instance.state is ProgramState.RUNNING:
-                    instance.fault(message, self.clock.now())
+            self._apply_stall()
+
+    def _apply_stall(self) -> None:
+        """Fault the program a stall was reported for, once the loop runs again, and say so at once."""
+        if self._stall is None:
+            return
+        stalled_task, program, message = self._stall
+        self._stall = None
+        for instance in stalled_task.programs:
+            if instance.name == program and instance.state is ProgramState.RUNNING:
+                instance.fault(message, self.clock.now())
+        # Clients could not be answered while the loop was blocked; the first answers after it
+        # must already say ERROR, not wait for the next publication (up to 0.5 s).
+        self.system_tags.publish_state()
 
     def _on_stall(self, task: Task, program: str, message: str) -> None:
         # Called from the stall detector's thread while the loop is blocked: only plain
