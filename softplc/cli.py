@@ -18,7 +18,7 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from softplc import __version__
 from softplc.clock import RealClock, SimClock
@@ -28,7 +28,11 @@ from softplc.expression import Condition, ExpressionError
 from softplc.schema import editor_schema
 from softplc.yamlsource import ConfigError
 
+if TYPE_CHECKING:
+    from softplc.retain import RetainError
+
 EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
+EXIT_RETAIN_CORRUPT = 3  # `softplc run`: retain.sqlite is corrupt; nothing started until the user chooses
 DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules that add subcommands (each defines add_commands(subparsers)).
@@ -85,6 +89,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--until", metavar="EXPR", help="stop when EXPR over tag names holds, e.g. 't01_qSL >= 100'")
     run.add_argument("--state-dir", type=Path, metavar="DIR", help="where retained values etc. are kept (default .softplc next to CONFIG)")
     run.add_argument("--no-status", action="store_true", help="no live status line")
+    run.add_argument(
+        "--corrupt-retain", choices=("refuse", "initial"), default="refuse",
+        help="if STATE_DIR/retain.sqlite is corrupt: refuse to start (default, exit status 3), or set it aside "
+        "(renamed retain.sqlite.corrupt-TIME) and start every retained tag from its initial value",
+    )
     run.add_argument(
         "--loop", choices=("asyncio", "uvloop"), default="asyncio",
         help="event loop: asyncio (default) or uvloop (pip install uvloop; lower scan jitter)",
@@ -226,6 +235,7 @@ def print_table(rows: list[list[str]], header: tuple[str, ...] | list[str], stre
 
 def cmd_run(args: argparse.Namespace) -> int:
     from softplc.adapters import build_adapters
+    from softplc.retain import RetainError
     from softplc.runtime import AdapterError, Runtime
 
     config = load_config(args.config)
@@ -261,7 +271,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     clock = SimClock(speed=args.speed) if args.sim else RealClock()
     # A simulated run starts from the initial values and leaves the retained ones alone, so
     # it gives the same result every time and never disturbs the real plant's state.
-    runtime = Runtime(config, clock, state_dir=args.state_dir, retain=not args.sim)
+    runtime = Runtime(config, clock, state_dir=args.state_dir, retain=not args.sim, corrupt_retain=args.corrupt_retain)
     for adapter in build_adapters(config, args):
         runtime.add_adapter(adapter)
     show_status = not args.no_status and sys.stderr.isatty()
@@ -312,6 +322,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     except AdapterError as error:
         print(f"softplc: cannot start: {error}", file=sys.stderr)
         return EXIT_FAILURE
+    except RetainError as error:
+        return _retain_refused(error)
     finally:
         signal.signal(signal.SIGINT, previous_handler)
     if show_status:
@@ -324,6 +336,20 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.sim:
         print("(simulated clock: a scan takes no simulated time, so scan and latency times are 0 by construction)", file=sys.stderr)
     return EXIT_OK if runtime.error == "" else EXIT_FAILURE
+
+
+def _retain_refused(error: RetainError) -> int:
+    """Say why the retained values cannot be used and what the user may do; nothing has started."""
+    print(f"softplc: cannot start: the retained values in {error.path} cannot be used: {error.detail}", file=sys.stderr)
+    if not error.corrupt:
+        return EXIT_FAILURE
+    print(
+        "softplc: nothing was started and the file was left as it is. Restore it from a backup, or start every "
+        "retained tag from its initial value: run again with --corrupt-retain initial (the bad file is then kept "
+        f"beside it as {error.path.name}.corrupt-TIME)",
+        file=sys.stderr,
+    )
+    return EXIT_RETAIN_CORRUPT
 
 
 async def _status_loop(runtime: Any, show: bool, args: argparse.Namespace) -> None:

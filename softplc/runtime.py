@@ -17,15 +17,14 @@ from typing import Any, Protocol
 
 from softplc.clock import Clock, RealClock, SimClock
 from softplc.config import PlantConfig
-from softplc.datatypes import TypeMismatch
 from softplc.durations import parse_duration
 from softplc.expression import Condition
 from softplc.program import ProgramContext
-from softplc.retain import RetainStore
+from softplc.retain import RetainStore, open_retained
 from softplc.scan import ProgramInstance, ProgramState, ScanEngine, Task
 from softplc.stall import StallDetector
 from softplc.systags import SystemTags, system_tag_definitions
-from softplc.tagdb import TagDatabase
+from softplc.tagdb import TagDatabase, WriteRejected
 from softplc.tags import Tag
 from softplc.yamlsource import ConfigError, Location, Problem
 
@@ -61,8 +60,22 @@ class AdapterError(RuntimeError):
 class Runtime:
     """One plant: its tags, tasks and adapters, on one clock."""
 
-    def __init__(self, config: PlantConfig, clock: Clock | None = None, *, state_dir: Path | None = None, retain: bool = True) -> None:
-        """`retain=False`: start from the initial values and leave the retained ones alone (a simulated run)."""
+    def __init__(
+        self,
+        config: PlantConfig,
+        clock: Clock | None = None,
+        *,
+        state_dir: Path | None = None,
+        retain: bool = True,
+        corrupt_retain: str = "refuse",
+    ) -> None:
+        """`retain=False`: start from the initial values and leave the retained ones alone (a simulated run).
+
+        `corrupt_retain`: what `start()` does when `retain.sqlite` is corrupt — `refuse` (raise
+        RetainError, leaving the file as it is) or `initial` (set it aside, start from initial values).
+        """
+        if corrupt_retain not in ("refuse", "initial"):
+            raise ValueError(f"corrupt_retain must be 'refuse' or 'initial', not {corrupt_retain!r}")
         self.config = config
         self.clock = clock or RealClock()
         self.state_dir = state_dir or config.state_dir
@@ -81,6 +94,7 @@ class Runtime:
         self._stall_detector: StallDetector | None = None
         self._retain: RetainStore | None = None
         self._retain_enabled = retain
+        self._corrupt_retain = corrupt_retain
         self.running = asyncio.Event()  # set once every adapter has started and scanning begins
         self.started_at: float | None = None  # clock time when scanning began
         self._retain_dirty: dict[str, Tag] = {}
@@ -296,18 +310,19 @@ class Runtime:
         retained = [tag for tag in self.db if tag.definition.retain]
         if not retained:
             return
-        self._retain = RetainStore(self.state_dir / "retain.sqlite")
-        stored = self._retain.load()
+        self._retain, stored = open_retained(self.state_dir / "retain.sqlite", self._corrupt_retain, self.clock.wall())
         values: dict[str, Any] = {}
         for tag in retained:
             if tag.name not in stored:
                 continue
             type_name, value = stored[tag.name]
             try:
-                values[tag.name] = tag.definition.type.coerce(value)
-            except TypeMismatch:
-                log.warning("retained value %r of %s (%s) no longer fits its type %s; using the initial value",
-                            value, tag.name, type_name, tag.definition.type.value)
+                # The same rules as any write (type, min/max, text): the configuration may have
+                # changed since the value was saved, and a stored file is input like any other.
+                values[tag.name] = self.db.validate(tag.name, value, role=None)
+            except WriteRejected as rejected:
+                log.warning("retained value %r of %s (saved as %s) is refused: %s: %s; %s starts at its initial value %r",
+                            value, tag.name, type_name, rejected.rule.value, rejected.detail, tag.name, tag.definition.initial)
         self.db.commit(values)
         if values:
             log.info("restored %d retained tag values from %s", len(values), self._retain.path)
