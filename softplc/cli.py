@@ -237,6 +237,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     from softplc.adapters import build_adapters
     from softplc.retain import RetainError
     from softplc.runtime import AdapterError, Runtime
+    from softplc.stop_signals import StopSignals
+    from softplc.stop_signals import describe as describe_signal
 
     config = load_config(args.config)
     if args.speed is not None and not args.sim:
@@ -276,66 +278,67 @@ def cmd_run(args: argparse.Namespace) -> int:
         runtime.add_adapter(adapter)
     show_status = not args.no_status and sys.stderr.isatty()
 
+    def stop_requested(signum: int) -> None:
+        reason = describe_signal(signum)
+        after_status_line = "\n" if show_status else ""
+        print(f"{after_status_line}softplc: {reason}: stopping (the servers, then retained values are saved)", file=sys.stderr)
+        runtime.request_stop(reason)
+
+    def signal_again(signum: int) -> None:
+        print(f"softplc: {signal.Signals(signum).name} received while stopping: ignored, the shutdown under way "
+              "finishes first (SIGKILL abandons it)", file=sys.stderr)
+
+    signals = StopSignals(stop_requested, signal_again)
+
     async def main_async() -> str:
         loop = asyncio.get_running_loop()
         if args.rt_priority is not None:
             from softplc.realtime import use_normal_priority_executor
 
             use_normal_priority_executor(loop)
-        interrupts = 0
-
-        def interrupt() -> None:
-            nonlocal interrupts
-            interrupts += 1
-            if interrupts > 1:
-                raise KeyboardInterrupt
-            runtime.request_stop("interrupted (Ctrl-C)")
-
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            try:
-                loop.add_signal_handler(sig, interrupt)
-            except (NotImplementedError, RuntimeError):
-                pass
-        # Only now: a Ctrl-C that came after this check but before the handlers were in place
-        # would otherwise be lost.
-        if early_interrupts:
-            interrupts = len(early_interrupts)
-            runtime.request_stop("interrupted (Ctrl-C)")
+        signals.attach(loop)  # a signal that came before (e.g. while the loop was created) stops the run now
         status = asyncio.create_task(_status_loop(runtime, show_status, args))
         try:
             return await runtime.run(duration=args.duration, until=until)
         finally:
             status.cancel()
+            signals.detach()
 
     mode = "simulated clock" + (f" x{args.speed:g}" if args.speed else ", as fast as possible") if args.sim else "real time"
     mode += f", {args.loop} event loop"
     print(f"softplc {__version__}: plant '{config.name}' — {summary(config)}; {mode}", file=sys.stderr)
     started = time.monotonic()
-    # Until the event loop's own handler is in place, a Ctrl-C is noted (and ends the run as soon
-    # as it starts) rather than raised wherever the interpreter happens to be, e.g. half-way
-    # through creating the event loop.
-    early_interrupts: list[int] = []
-    previous_handler = signal.signal(signal.SIGINT, lambda signum, frame: early_interrupts.append(signum))
+    # From here to the end, SIGINT and SIGTERM only ask for a stop (the first) or are ignored
+    # (the others), never raised or fatal half-way through creating the loop, stopping the
+    # servers, saving retained values or printing the statistics.
+    signals.install()
     try:
-        with asyncio.Runner(loop_factory=loop_factory) as runner:
-            reason = runner.run(main_async())
-    except AdapterError as error:
-        print(f"softplc: cannot start: {error}", file=sys.stderr)
-        return EXIT_FAILURE
-    except RetainError as error:
-        return _retain_refused(error)
+        try:
+            with asyncio.Runner(loop_factory=loop_factory) as runner:
+                reason = runner.run(main_async())
+        except AdapterError as error:
+            print(f"softplc: cannot start: {error}", file=sys.stderr)
+            return EXIT_FAILURE
+        except RetainError as error:
+            return _retain_refused(error)
+        if show_status:
+            print(file=sys.stderr)
+        wall = time.monotonic() - started
+        scanned = runtime.clock.now() - (runtime.started_at if runtime.started_at is not None else runtime.clock.now())
+        clock_name = "simulated" if args.sim else "real"
+        print(f"stopped: {reason or 'stopped'} — scanned {scanned:.1f} s of {clock_name} time; {wall:.1f} s wall time with start-up", file=sys.stderr)
+        print_task_statistics(runtime, sys.stderr)
+        if args.sim:
+            print("(simulated clock: a scan takes no simulated time, so scan and latency times are 0 by construction)", file=sys.stderr)
+        if runtime.error:
+            print(f"softplc: the runtime was in ERROR when it stopped: {runtime.error}", file=sys.stderr)
+        # A stop asked for by a signal (an operator, systemd) that went cleanly is a success
+        # whatever happened before; a run that ended by itself reports an ERROR never reset.
+        if signals.first is not None and reason == describe_signal(signals.first):
+            return EXIT_OK
+        return EXIT_OK if runtime.error == "" else EXIT_FAILURE
     finally:
-        signal.signal(signal.SIGINT, previous_handler)
-    if show_status:
-        print(file=sys.stderr)
-    wall = time.monotonic() - started
-    scanned = runtime.clock.now() - (runtime.started_at if runtime.started_at is not None else runtime.clock.now())
-    clock_name = "simulated" if args.sim else "real"
-    print(f"stopped: {reason or 'stopped'} — scanned {scanned:.1f} s of {clock_name} time; {wall:.1f} s wall time with start-up", file=sys.stderr)
-    print_task_statistics(runtime, sys.stderr)
-    if args.sim:
-        print("(simulated clock: a scan takes no simulated time, so scan and latency times are 0 by construction)", file=sys.stderr)
-    return EXIT_OK if runtime.error == "" else EXIT_FAILURE
+        signals.restore()
 
 
 def _retain_refused(error: RetainError) -> int:

@@ -180,6 +180,14 @@ def test_softplc_run_refuses_a_corrupt_retain_file_with_a_message_and_exit_statu
         assert code == 0, err
         assert "softplc: ERROR: RETAINED VALUES LOST: " in err
         assert any(p.name.startswith("retain.sqlite.corrupt-") for p in path.parent.iterdir())
+        path.unlink()
+        path.mkdir()  # not corrupt, but unusable: refused, exit status 1, no --corrupt-retain advice
+        code = main(["run", str(plant), "--duration", "0.2", "--no-status", "--no-servers", "--state-dir", str(path.parent),
+                     "--corrupt-retain", "initial"])
+        err = capsys.readouterr().err
+        assert code == 1, err
+        assert f"softplc: cannot start: the retained values in {path} cannot be used: cannot be read: " in err
+        assert "--corrupt-retain" not in err and "Traceback" not in err
     finally:
         root.handlers[:] = handlers
         root.setLevel(level)
