@@ -93,7 +93,10 @@ def open_retained(path: Path, corrupt: str, wall: float) -> tuple[RetainStore, d
     except RetainError as error:
         if not error.corrupt or corrupt == "refuse":
             raise
-        kept = set_aside(path, time.strftime("%Y%m%dT%H%M%S", time.localtime(wall)))
+        try:
+            kept = set_aside(path, time.strftime("%Y%m%dT%H%M%S", time.localtime(wall)))
+        except OSError as rename_error:
+            raise RetainError(path, f"{error.detail}, and cannot be set aside: {rename_error}", corrupt=False) from None
         log.error("RETAINED VALUES LOST: %s is %s. It is kept as %s for inspection; every retained tag "
                   "starts at its initial value", path, error.detail, kept)
         return RetainStore(path), {}
