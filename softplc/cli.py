@@ -18,7 +18,7 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from softplc import __version__
 from softplc.clock import RealClock, SimClock
@@ -28,7 +28,11 @@ from softplc.expression import Condition, ExpressionError
 from softplc.schema import editor_schema
 from softplc.yamlsource import ConfigError
 
+if TYPE_CHECKING:
+    from softplc.retain import RetainError
+
 EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
+EXIT_RETAIN_CORRUPT = 3  # `softplc run`: retain.sqlite is corrupt; nothing started until the user chooses
 DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules that add subcommands (each defines add_commands(subparsers)).
@@ -85,6 +89,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--until", metavar="EXPR", help="stop when EXPR over tag names holds, e.g. 't01_qSL >= 100'")
     run.add_argument("--state-dir", type=Path, metavar="DIR", help="where retained values etc. are kept (default .softplc next to CONFIG)")
     run.add_argument("--no-status", action="store_true", help="no live status line")
+    run.add_argument(
+        "--corrupt-retain", choices=("refuse", "initial"), default="refuse",
+        help="if STATE_DIR/retain.sqlite is corrupt: refuse to start (default, exit status 3), or set it aside "
+        "(renamed retain.sqlite.corrupt-TIME) and start every retained tag from its initial value",
+    )
     run.add_argument(
         "--loop", choices=("asyncio", "uvloop"), default="asyncio",
         help="event loop: asyncio (default) or uvloop (pip install uvloop; lower scan jitter)",
@@ -226,7 +235,10 @@ def print_table(rows: list[list[str]], header: tuple[str, ...] | list[str], stre
 
 def cmd_run(args: argparse.Namespace) -> int:
     from softplc.adapters import build_adapters
+    from softplc.retain import RetainError
     from softplc.runtime import AdapterError, Runtime
+    from softplc.stop_signals import StopSignals
+    from softplc.stop_signals import describe as describe_signal
 
     config = load_config(args.config)
     if args.speed is not None and not args.sim:
@@ -261,10 +273,22 @@ def cmd_run(args: argparse.Namespace) -> int:
     clock = SimClock(speed=args.speed) if args.sim else RealClock()
     # A simulated run starts from the initial values and leaves the retained ones alone, so
     # it gives the same result every time and never disturbs the real plant's state.
-    runtime = Runtime(config, clock, state_dir=args.state_dir, retain=not args.sim)
+    runtime = Runtime(config, clock, state_dir=args.state_dir, retain=not args.sim, corrupt_retain=args.corrupt_retain)
     for adapter in build_adapters(config, args):
         runtime.add_adapter(adapter)
     show_status = not args.no_status and sys.stderr.isatty()
+
+    def stop_requested(signum: int) -> None:
+        reason = describe_signal(signum)
+        after_status_line = "\n" if show_status else ""
+        print(f"{after_status_line}softplc: {reason}: stopping (the servers, then retained values are saved)", file=sys.stderr)
+        runtime.request_stop(reason)
+
+    def signal_again(signum: int) -> None:
+        print(f"softplc: {signal.Signals(signum).name} received while stopping: ignored, the shutdown under way "
+              "finishes first (SIGKILL abandons it)", file=sys.stderr)
+
+    signals = StopSignals(stop_requested, signal_again)
 
     async def main_async() -> str:
         loop = asyncio.get_running_loop()
@@ -272,58 +296,63 @@ def cmd_run(args: argparse.Namespace) -> int:
             from softplc.realtime import use_normal_priority_executor
 
             use_normal_priority_executor(loop)
-        interrupts = 0
-
-        def interrupt() -> None:
-            nonlocal interrupts
-            interrupts += 1
-            if interrupts > 1:
-                raise KeyboardInterrupt
-            runtime.request_stop("interrupted (Ctrl-C)")
-
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            try:
-                loop.add_signal_handler(sig, interrupt)
-            except (NotImplementedError, RuntimeError):
-                pass
-        # Only now: a Ctrl-C that came after this check but before the handlers were in place
-        # would otherwise be lost.
-        if early_interrupts:
-            interrupts = len(early_interrupts)
-            runtime.request_stop("interrupted (Ctrl-C)")
+        signals.attach(loop)  # a signal that came before (e.g. while the loop was created) stops the run now
         status = asyncio.create_task(_status_loop(runtime, show_status, args))
         try:
             return await runtime.run(duration=args.duration, until=until)
         finally:
             status.cancel()
+            signals.detach()
 
     mode = "simulated clock" + (f" x{args.speed:g}" if args.speed else ", as fast as possible") if args.sim else "real time"
     mode += f", {args.loop} event loop"
     print(f"softplc {__version__}: plant '{config.name}' — {summary(config)}; {mode}", file=sys.stderr)
     started = time.monotonic()
-    # Until the event loop's own handler is in place, a Ctrl-C is noted (and ends the run as soon
-    # as it starts) rather than raised wherever the interpreter happens to be, e.g. half-way
-    # through creating the event loop.
-    early_interrupts: list[int] = []
-    previous_handler = signal.signal(signal.SIGINT, lambda signum, frame: early_interrupts.append(signum))
+    # From here to the end, SIGINT and SIGTERM only ask for a stop (the first) or are ignored
+    # (the others), never raised or fatal half-way through creating the loop, stopping the
+    # servers, saving retained values or printing the statistics.
+    signals.install()
     try:
-        with asyncio.Runner(loop_factory=loop_factory) as runner:
-            reason = runner.run(main_async())
-    except AdapterError as error:
-        print(f"softplc: cannot start: {error}", file=sys.stderr)
-        return EXIT_FAILURE
+        try:
+            with asyncio.Runner(loop_factory=loop_factory) as runner:
+                reason = runner.run(main_async())
+        except AdapterError as error:
+            print(f"softplc: cannot start: {error}", file=sys.stderr)
+            return EXIT_FAILURE
+        except RetainError as error:
+            return _retain_refused(error)
+        if show_status:
+            print(file=sys.stderr)
+        wall = time.monotonic() - started
+        scanned = runtime.clock.now() - (runtime.started_at if runtime.started_at is not None else runtime.clock.now())
+        clock_name = "simulated" if args.sim else "real"
+        print(f"stopped: {reason or 'stopped'} — scanned {scanned:.1f} s of {clock_name} time; {wall:.1f} s wall time with start-up", file=sys.stderr)
+        print_task_statistics(runtime, sys.stderr)
+        if args.sim:
+            print("(simulated clock: a scan takes no simulated time, so scan and latency times are 0 by construction)", file=sys.stderr)
+        if runtime.error:
+            print(f"softplc: the runtime was in ERROR when it stopped: {runtime.error}", file=sys.stderr)
+        # A stop asked for by a signal (an operator, systemd) that went cleanly is a success
+        # whatever happened before; a run that ended by itself reports an ERROR never reset.
+        if signals.first is not None and reason == describe_signal(signals.first):
+            return EXIT_OK
+        return EXIT_OK if runtime.error == "" else EXIT_FAILURE
     finally:
-        signal.signal(signal.SIGINT, previous_handler)
-    if show_status:
-        print(file=sys.stderr)
-    wall = time.monotonic() - started
-    scanned = runtime.clock.now() - (runtime.started_at if runtime.started_at is not None else runtime.clock.now())
-    clock_name = "simulated" if args.sim else "real"
-    print(f"stopped: {reason or 'stopped'} — scanned {scanned:.1f} s of {clock_name} time; {wall:.1f} s wall time with start-up", file=sys.stderr)
-    print_task_statistics(runtime, sys.stderr)
-    if args.sim:
-        print("(simulated clock: a scan takes no simulated time, so scan and latency times are 0 by construction)", file=sys.stderr)
-    return EXIT_OK if runtime.error == "" else EXIT_FAILURE
+        signals.restore()
+
+
+def _retain_refused(error: RetainError) -> int:
+    """Say why the retained values cannot be used and what the user may do; nothing has started."""
+    print(f"softplc: cannot start: the retained values in {error.path} cannot be used: {error.detail}", file=sys.stderr)
+    if not error.corrupt:
+        return EXIT_FAILURE
+    print(
+        "softplc: nothing was started and the file was left as it is. Restore it from a backup, or start every "
+        "retained tag from its initial value: run again with --corrupt-retain initial (the bad file is then kept "
+        f"beside it as {error.path.name}.corrupt-TIME)",
+        file=sys.stderr,
+    )
+    return EXIT_RETAIN_CORRUPT
 
 
 async def _status_loop(runtime: Any, show: bool, args: argparse.Namespace) -> None:

@@ -21,17 +21,16 @@ from typing import Any, Protocol
 from softplc.clock import Clock, RealClock, SimClock
 from softplc.commands import Commands
 from softplc.config import PlantConfig
-from softplc.datatypes import TypeMismatch
 from softplc.durations import parse_duration
 from softplc.events import EventBus
 from softplc.expression import Condition
 from softplc.program import ProgramContext
-from softplc.retain import RetainStore
+from softplc.retain import RetainStore, open_retained
 from softplc.runtime_commands import register_runtime_commands
 from softplc.scan import ProgramInstance, ProgramState, ScanEngine, Task
 from softplc.stall import StallDetector
 from softplc.systags import SystemTags, system_tag_definitions
-from softplc.tagdb import TagDatabase
+from softplc.tagdb import TagDatabase, WriteRejected
 from softplc.yamlsource import ConfigError, Location, Problem
 
 log = logging.getLogger(__name__)
@@ -66,8 +65,22 @@ class AdapterError(RuntimeError):
 class Runtime:
     """One plant: its tags, tasks and adapters, on one clock."""
 
-    def __init__(self, config: PlantConfig, clock: Clock | None = None, *, state_dir: Path | None = None, retain: bool = True) -> None:
-        """`retain=False`: start from the initial values and leave the retained ones alone (a simulated run)."""
+    def __init__(
+        self,
+        config: PlantConfig,
+        clock: Clock | None = None,
+        *,
+        state_dir: Path | None = None,
+        retain: bool = True,
+        corrupt_retain: str = "refuse",
+    ) -> None:
+        """`retain=False`: start from the initial values and leave the retained ones alone (a simulated run).
+
+        `corrupt_retain`: what `start()` does when `retain.sqlite` is corrupt — `refuse` (raise
+        RetainError, leaving the file as it is) or `initial` (set it aside, start from initial values).
+        """
+        if corrupt_retain not in ("refuse", "initial"):
+            raise ValueError(f"corrupt_retain must be 'refuse' or 'initial', not {corrupt_retain!r}")
         self.config = config
         self.clock = clock or RealClock()
         self.state_dir = state_dir or config.state_dir
@@ -89,6 +102,7 @@ class Runtime:
         self._stall_detector: StallDetector | None = None
         self._retain: RetainStore | None = None
         self._retain_enabled = retain
+        self._corrupt_retain = corrupt_retain
         self.running = asyncio.Event()  # set once every adapter has started and scanning begins
         self.started_at: float | None = None  # clock time when scanning began
         self._retain_dirty: dict[str, tuple[str, Any]] = {}  # tag → (type name, value) to save
@@ -136,13 +150,18 @@ class Runtime:
             self._stop_event.set()
 
     def reset_faults(self) -> None:
-        for task in self.tasks:
-            for instance in task.programs:
-                if instance.state is ProgramState.FAULTED:
-                    instance.reset(self.clock.now())
+        """Clear the ERROR state and restart every FAULTED program (`_sys.reset_faults`)."""
+        # Cleared first: a setup() that stalls during this very reset puts the runtime back in ERROR.
         if self.state is RuntimeState.ERROR:
             self.state = RuntimeState.RUNNING
             self.error = ""
+        now = self.clock.now()
+        for task in self.tasks:
+            for instance in task.programs:
+                if instance.state is ProgramState.FAULTED:
+                    # Outside any cycle, yet watched like one: a setup() that blocks is named.
+                    self.engine.run_setup(task, instance, lambda instance=instance: instance.reset(now))
+                    self._apply_stall()
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -156,7 +175,11 @@ class Runtime:
             self._stop_event.set()
         if self._retain_enabled:
             self._load_retained()
+        # Watching from before the first setup(): one that blocks at start-up is named too.
+        self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after())
+        self._stall_detector.start()
         self.engine.start_programs()
+        self._apply_stall()
         self.system_tags.publish(self.clock.now())
         started: list[Adapter] = []
         try:
@@ -167,8 +190,11 @@ class Runtime:
             for adapter in reversed(started):
                 await _quietly(adapter.stop(), adapter.name)
             await self._cancel_background()
+            if self._stall_detector is not None:
+                self._stall_detector.stop()
             raise
-        self.state = RuntimeState.RUNNING
+        if self.state is RuntimeState.STARTING:  # not ERROR: a stalled setup() stays visible
+            self.state = RuntimeState.RUNNING
         if not self.clock.simulated:
             # What exists now (tags, programs, servers' address spaces, maps) lives as long as
             # the runtime. A full collection walks every object it tracks — 10-20 ms with the
@@ -181,8 +207,6 @@ class Runtime:
             self._drive = self.spawn(self.clock.drive(), "sim-clock")
         self.spawn(self.engine.run(), "scan-engine")
         self.spawn(self._housekeeping(), "housekeeping")
-        self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after())
-        self._stall_detector.start()
         self.started_at = self.clock.now()
         self.running.set()
 
@@ -252,11 +276,20 @@ class Runtime:
 
     def _after_cycle(self, task: Task) -> None:
         if self._stall is not None:
-            stalled_task, program, message = self._stall
-            self._stall = None
-            for instance in stalled_task.programs:
-                if instance.name == program and instance.state is ProgramState.RUNNING:
-                    instance.fault(message, self.clock.now())
+            self._apply_stall()
+
+    def _apply_stall(self) -> None:
+        """Fault the program a stall was reported for, once the loop runs again, and say so at once."""
+        if self._stall is None:
+            return
+        stalled_task, program, message = self._stall
+        self._stall = None
+        for instance in stalled_task.programs:
+            if instance.name == program and instance.state is ProgramState.RUNNING:
+                instance.fault(message, self.clock.now())
+        # Clients could not be answered while the loop was blocked; the first answers after it
+        # must already say ERROR, not wait for the next publication (up to 0.5 s).
+        self.system_tags.publish_state()
 
     def _on_stall(self, task: Task, program: str, message: str) -> None:
         # Called from the stall detector's thread while the loop is blocked: only plain
@@ -288,18 +321,19 @@ class Runtime:
         retained = [tag for tag in self.db if tag.definition.retain]
         if not retained:
             return
-        self._retain = RetainStore(self.state_dir / "retain.sqlite")
-        stored = self._retain.load()
+        self._retain, stored = open_retained(self.state_dir / "retain.sqlite", self._corrupt_retain, self.clock.wall())
         values: dict[str, Any] = {}
         for tag in retained:
             if tag.name not in stored:
                 continue
             type_name, value = stored[tag.name]
             try:
-                values[tag.name] = tag.definition.type.coerce(value)
-            except TypeMismatch:
-                log.warning("retained value %r of %s (%s) no longer fits its type %s; using the initial value",
-                            value, tag.name, type_name, tag.definition.type.value)
+                # The same rules as any write (type, min/max, text): the configuration may have
+                # changed since the value was saved, and a stored file is input like any other.
+                values[tag.name] = self.db.validate(tag.name, value, role=None)
+            except WriteRejected as rejected:
+                log.warning("retained value %r of %s (saved as %s) is refused: %s: %s; %s starts at its initial value %r",
+                            value, tag.name, type_name, rejected.rule.value, rejected.detail, tag.name, tag.definition.initial)
         self.db.commit(values)
         if values:
             log.info("restored %d retained tag values from %s", len(values), self._retain.path)

@@ -111,8 +111,12 @@ class ProgramInstance:
         self._retry_at = math.inf
         self.start(now)
 
+    def restart_due(self, now: float) -> bool:
+        """Whether a FAULTED program's restart delay has passed (see `maybe_restart`)."""
+        return self.state is ProgramState.FAULTED and now >= self._retry_at
+
     def maybe_restart(self, now: float) -> None:
-        if self.state is ProgramState.FAULTED and now >= self._retry_at:
+        if self.restart_due(now):
             self.restarts += 1
             log.warning("restarting program %s (restart %d of %d)", self.name, self.restarts, self.restart.max_restarts)
             self.state = ProgramState.RUNNING
@@ -147,7 +151,6 @@ class ProgramInstance:
             self.fault(f"wrote an invalid value: {rejected}", now)
             return {}
         return outputs
-
 
 
 @dataclass
@@ -195,7 +198,10 @@ class Task:
             names.update(dict.fromkeys(instance.tag_names))
         self.tag_names = list(names)
         self.next_release = 0.0
-        self.running_program = ""  # read by the stall detector while a scan is under way
+        # Read by the stall detector (another thread) while a cycle or a setup is under way:
+        # the program running now, and whether it is in its setup() rather than its scan().
+        self.running_program = ""
+        self.running_setup = False
         self._origin = 0.0
         self._k = 0
         self._last_start: float | None = None
@@ -211,10 +217,18 @@ class Task:
         image = db.snapshot(self.tag_names)
         outputs: dict[str, Any] = {}
         for instance in self.programs:
-            instance.maybe_restart(now)
-            if instance.state is not ProgramState.RUNNING:
-                continue
+            # Named before anything of it runs: a restart's setup() that blocks is blamed on it.
             self.running_program = instance.name
+            if instance.state is not ProgramState.RUNNING:
+                if not instance.restart_due(now):
+                    continue
+                self.running_setup = True
+                try:
+                    instance.maybe_restart(now)
+                finally:
+                    self.running_setup = False
+                if instance.state is not ProgramState.RUNNING:
+                    continue
             produced = instance.scan(image, db, now)
             if produced:
                 image.update(produced)
@@ -245,7 +259,7 @@ class Task:
 
 @dataclass
 class CurrentScan:
-    """The cycle under way; read by the stall detector from another thread."""
+    """The cycle (or out-of-cycle setup) under way; read by the stall detector from another thread."""
 
     task: Task
     real_start: float
@@ -270,9 +284,22 @@ class ScanEngine:
         self._stopping = True
 
     def start_programs(self) -> None:
+        """Run every program's setup() (at start-up), each watched for stalls like a scan."""
         for task in self.tasks:
             for instance in task.programs:
-                instance.start()
+                self.run_setup(task, instance, instance.start)
+
+    def run_setup(self, task: Task, instance: ProgramInstance, setup: Callable[[], None]) -> None:
+        """Run `setup` (a program's start or reset) outside a cycle, seen by the stall detector as that program's."""
+        self.current = CurrentScan(task, time.monotonic())
+        task.running_program = instance.name
+        task.running_setup = True
+        try:
+            setup()
+        finally:
+            task.running_setup = False
+            task.running_program = ""
+            self.current = None
 
     async def run(self) -> None:
         """Scan until `stop()`. With no tasks, apply the write journal every 10 ms instead."""

@@ -3,7 +3,8 @@
 A program that blocks (an endless loop, a `time.sleep`, a network call) stalls every task and
 every protocol served by the same event loop. The detector runs outside the loop, so it can
 still report: it logs the task, the program and where it is stuck, and puts the runtime into
-its ERROR state. When the scan finally returns, the program is faulted.
+its ERROR state. When the scan finally returns, the program is faulted. A program's setup()
+run outside a cycle (at start-up, or by an operator's reset) is watched the same way.
 """
 
 from __future__ import annotations
@@ -67,11 +68,14 @@ class StallDetector:
             if reported_start == current.real_start and now - last_report < 5.0:
                 continue
             task = current.task
-            program = task.running_program or "(between programs)"
+            program, in_setup = task.running_program, task.running_setup
             frame = sys._current_frames().get(self._loop_thread_id)
+            if self.engine.current is not current:
+                continue  # it returned while we looked: the names may belong to the next cycle
             where = "".join(traceback.format_stack(frame, limit=3)).strip() if frame is not None else "unknown"
+            culprit = f"setup() of program {program}" if in_setup else f"program {program or '(between programs)'}"
             message = (
-                f"task {task.name} is stuck in program {program} for {blocked:.1f} s "
+                f"task {task.name} is stuck in {culprit} for {blocked:.1f} s "
                 f"(watchdog {task.watchdog * 1e3:g} ms): the event loop is blocked"
             )
             log.error("%s; the runtime is in ERROR state. Stuck at:\n%s", message, where)

@@ -82,9 +82,7 @@ class SystemTags:
         if db.value(RESET_FAULTS):
             self._reset_faults()
             values[RESET_FAULTS] = False
-        state, error = self._state()
-        values[STATE] = state
-        values[ERROR] = error
+        values.update(self._state_values())
         values[TIME] = float(now)
         values[FORCED] = len(db.forces)
         for task in self.engine.tasks:
@@ -97,9 +95,20 @@ class SystemTags:
             for series in _SERIES:
                 for stat, figure in getattr(stats, series).summary().items():
                     values[f"{prefix}{series}_ms_{stat}"] = float(figure)
+        db.commit(values)
+
+    def publish_state(self) -> None:
+        """Write the runtime's and the programs' states now, between two publications (after a stall)."""
+        self.db.commit(self._state_values())
+
+    def _state_values(self) -> dict[str, Any]:
+        state, error = self._state()
+        values: dict[str, Any] = {STATE: state, ERROR: error}
+        for task in self.engine.tasks:
+            prefix = f"{SYSTEM_PREFIX}{task.name}."
             for instance in task.programs:
                 program_prefix = f"{prefix}{instance.name}."
                 values[program_prefix + "state"] = instance.state.value
                 values[program_prefix + "error"] = instance.error
                 values[program_prefix + "faults"] = instance.faults % 2**32
-        db.commit(values)
+        return values

@@ -160,3 +160,22 @@ class NumpyWriter(Program):
         self.label = np.int64(1)
         self.flag = np.bool_(True)
         self.level = np.float32(0.25)
+
+
+class SlowSetup(Program):
+    """Raises on its first scan only; its `block_on`-th setup() blocks the event loop for `block` s."""
+
+    scans = InOut("scans completed")
+    block = Param(1.0, "seconds the blocking setup() takes")
+    block_on = Param(2, "which setup() blocks: 1 at start-up, 2 at the first restart or reset")
+
+    def setup(self) -> None:
+        self.setups = getattr(self, "setups", 0) + 1
+        if self.setups == self.block_on:
+            time.sleep(self.block)
+
+    def scan(self) -> None:
+        if not getattr(self, "raised", False):
+            self.raised = True
+            raise RuntimeError("first scan fails")
+        self.scans += 1

@@ -280,7 +280,8 @@ def test_ctrl_c_stops_cleanly_and_prints_statistics(plant: Path, tmp_path: Path,
     output = "\n".join(process.lines)
     assert code == 0, output
     assert "Traceback" not in output
-    assert "stopped: interrupted (Ctrl-C)" in output
+    assert "softplc: interrupted (SIGINT, Ctrl-C): stopping" in output
+    assert "stopped: interrupted (SIGINT, Ctrl-C)" in output
     header = next(line for line in process.lines if line.startswith("task "))
     assert "latency ms min/mean/p99/max" in header and "overruns" in header
     rows = statistics(output)

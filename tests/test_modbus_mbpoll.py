@@ -136,5 +136,5 @@ def test_softplc_run_stops_cleanly_on_ctrl_c(softplc):
     assert softplc.process.wait(15) == 0
     assert softplc.process.stderr is not None
     rest = softplc.process.stderr.read()
-    assert "stopped: interrupted (Ctrl-C)" in rest
+    assert "stopped: interrupted (SIGINT, Ctrl-C)" in rest
     assert "Traceback" not in "".join(softplc.lines) + rest

@@ -380,7 +380,8 @@ async def test_a_retained_value_that_no_longer_fits_its_type_falls_back_to_initi
     await second.start()
     try:
         assert second.db.value("setpoint") == 3
-        assert "no longer fits its type int16" in caplog.text
+        assert "retained value 10000000000.0 of setpoint (saved as float64) is refused: type mismatch: " in caplog.text
+        assert "does not fit in int16" in caplog.text and "setpoint starts at its initial value 3" in caplog.text
     finally:
         await second.stop()
 
