@@ -68,11 +68,7 @@ def _modbus(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapte
         disable=bool(getattr(args, "no_modbus", False)),
     )
     if not settings.enabled:
-        if any("modbus" in tag.options for tag in config.tags):
-            from softplc.modbus.address_map import build_address_map
-
-            build_address_map(config, settings)  # addresses pinned in the tags are checked even while the server is off
-        return []
+        return []  # its section, pinned addresses included, was checked with the configuration
     from softplc.modbus.server import ModbusAdapter
 
     return [ModbusAdapter(config, settings)]

@@ -21,7 +21,8 @@ from softplc.datatypes import DataType, TypeMismatch
 from softplc.durations import parse_duration
 from softplc.program import Program
 from softplc.scan import RestartPolicy
-from softplc.schema import CONFIG_SCHEMA, NAME_PATTERN, NAME_RULE
+from softplc.schema import NAME_PATTERN, NAME_RULE, config_schema
+from softplc.sections import program_keys, section_problems, tag_keys, template_keys
 from softplc.suggest import did_you_mean
 from softplc.tags import Access, TagDef
 from softplc.yamlsource import ConfigError, Location, Problem, SourceMap, load_yaml, parse_yaml
@@ -42,6 +43,7 @@ class ProgramConfig:
     restart: RestartPolicy
     enabled: bool = True
     location: Location | None = None  # where the program is named in the file (for errors)
+    options: dict[str, Any] = field(default_factory=dict)  # keys owners add to programs (softplc.sections)
 
 
 @dataclass
@@ -67,6 +69,8 @@ class PlantConfig:
     runtime: dict[str, Any] = field(default_factory=dict)
     raw: dict[str, Any] = field(default_factory=dict)
     source: SourceMap | None = None
+    # Where each tag is declared in the file: ("tags", NAME) or ("templates", T, "tags", NAME).
+    tag_paths: dict[str, tuple[Any, ...]] = field(default_factory=dict)
 
     @property
     def base_dir(self) -> Path:
@@ -85,6 +89,29 @@ class PlantConfig:
             if definition.name == name:
                 return definition
         raise KeyError(name)
+
+    def section(self, *path: str) -> dict[str, Any] | None:
+        """The mapping at `path` (e.g. "servers", "modbus"), or None when the file has none."""
+        node: Any = self.raw
+        for key in path:
+            node = node.get(key) if isinstance(node, dict) else None
+        return node if isinstance(node, dict) else None
+
+    def option_path(self, tag: str, key: str) -> tuple[Any, ...]:
+        """Where the `key` option of a tag is written: in the tag itself, or in its template."""
+        path = self.tag_paths.get(tag, ())
+        node: Any = self.raw
+        for step in path:
+            node = node.get(step) if isinstance(node, dict) else None
+        if isinstance(node, dict) and key in node or path[:1] != ("templates",):
+            return (*path, key)
+        return (*path[:2], key)
+
+    def problem(self, path: Sequence[str | int], message: str, *, at_key: bool = False) -> Problem:
+        """A Problem located at `path` of this file (its first line when the source is unknown)."""
+        if self.source is None:
+            return Problem(Location(str(self.path), 1, 1), message)
+        return self.source.problem(path, message, at_key=at_key)
 
 
 def load_config(path: str | Path) -> PlantConfig:
@@ -122,7 +149,7 @@ _TYPE_WORDS = {"object": "a mapping", "array": "a list", "string": "a string", "
 
 
 def _schema_problems(data: Any, source: SourceMap) -> tuple[list[Problem], set[tuple[Any, ...]]]:
-    return _schema_check(data, source, CONFIG_SCHEMA)
+    return _schema_check(data, source, config_schema())
 
 
 def schema_problems(data: Any, source: SourceMap, schema: dict[str, Any]) -> list[Problem]:
@@ -225,11 +252,10 @@ class _Checker:
         self._check_templates(data.get("templates"))
         self._check_plain_tags(data.get("tags"))
         tasks = self._check_tasks(data.get("tasks"))
-        self._check_runtime(data.get("runtime"))
         if self.problems:
             raise ConfigError(self.problems)
         plant = data.get("plant") or {}
-        return PlantConfig(
+        config = PlantConfig(
             path=self.path,
             name=plant.get("name", self.path.stem),
             description=plant.get("description", ""),
@@ -240,7 +266,14 @@ class _Checker:
             runtime=data.get("runtime") or {},
             raw=data,
             source=self.source,
+            tag_paths=dict(self.tag_paths),
         )
+        # The owners of the other sections check what their schema cannot say, on a plant
+        # whose core is sound (so none of them reports a follow-on of a core mistake).
+        problems = section_problems(config)
+        if problems:
+            raise ConfigError(problems)
+        return config
 
     # -- tags ---------------------------------------------------------------------------
 
@@ -265,6 +298,7 @@ class _Checker:
                     if tag_name not in tag_specs:
                         self.problem((*base, "initial", instance, tag_name), f"template '{template_name}' has no tag '{tag_name}'{did_you_mean(tag_name, tag_specs)}", at_key=True)
             group_root = template.get("group", template_name.capitalize() + "s")
+            template_options = {key: template[key] for key in template_keys() if key in template}
             external = self.external_initial.get(template_name, {})
             for instance in instances:
                 instance_overrides = overrides.get(instance) if isinstance(overrides.get(instance), dict) else {}
@@ -282,6 +316,7 @@ class _Checker:
                         (*base, "tags", tag_name),
                         default_group=f"{group_root}/{instance}",
                         initial_override=override,
+                        template_options=template_options,
                     )
 
     def _template_instances(self, name: str, template: dict[str, Any], base: tuple[Any, ...]) -> list[str]:
@@ -407,6 +442,7 @@ class _Checker:
         *,
         default_group: str,
         initial_override: tuple[Any, tuple[Any, ...] | Location] | None = None,
+        template_options: dict[str, Any] | None = None,
     ) -> None:
         if not isinstance(spec, dict) or not isinstance(name, str):
             return
@@ -464,7 +500,11 @@ class _Checker:
                     ok = False
         if not ok:
             return
-        options = {key: spec[key] for key in ("modbus",) if key in spec}
+        options = dict(template_options or {})
+        for key in tag_keys():
+            if key in spec:  # the tag's own value wins over its template's; mappings merge
+                own, inherited = spec[key], options.get(key)
+                options[key] = {**inherited, **own} if isinstance(own, dict) and isinstance(inherited, dict) else own
         self.tags[name] = TagDef(
             name=name,
             type=data_type,
@@ -483,20 +523,9 @@ class _Checker:
     # -- tasks and programs -------------------------------------------------------------
 
     def _duration(self, value: Any, path: tuple[Any, ...], what: str) -> float | None:
-        if isinstance(value, float) and not math.isfinite(value):
-            self.problem(path, f"bad {what} {value!r}: must be a finite duration such as 10ms, 100ms or 1s")
-            return None
-        if isinstance(value, (int, float)) and not isinstance(value, bool) and value <= 0:
-            self.problem(path, f"bad {what} {value!r}: must be greater than zero")
-            return None
-        try:
-            seconds = parse_duration(value)
-        except (ValueError, TypeError):
-            self.problem(path, f"bad {what} {value!r}: write a duration such as 10ms, 100ms or 1s")
-            return None
-        if seconds <= 0:
-            self.problem(path, f"bad {what} {value!r}: must be greater than zero")
-            return None
+        seconds, message = check_duration(value, what)
+        if message:
+            self.problem(path, message)
         return seconds
 
     def _check_tasks(self, tasks: Any) -> list[TaskConfig]:
@@ -566,7 +595,8 @@ class _Checker:
             if cls is None or bindings is None or params is None:
                 continue
             location = self.source.value((*path, "program"))
-            results.append(ProgramConfig(name, spec["program"], cls, bindings, params, restart, bool(spec.get("enabled", True)), location))
+            options = {key: spec[key] for key in program_keys() if key in spec}
+            results.append(ProgramConfig(name, spec["program"], cls, bindings, params, restart, bool(spec.get("enabled", True)), location, options))
         return results
 
     def _import_program(self, reference: str, path: tuple[Any, ...]) -> type[Program] | None:
@@ -643,9 +673,19 @@ class _Checker:
                 ok = False
         return result if ok else None
 
-    def _check_runtime(self, runtime: Any) -> None:
-        if isinstance(runtime, dict) and "stall_after" in runtime:
-            self._duration(runtime["stall_after"], ("runtime", "stall_after"), "stall_after")
+def check_duration(value: Any, what: str) -> tuple[float | None, str]:
+    """(seconds, "") for a positive duration, or (None, the message saying what is wrong)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None, f"bad {what} {value!r}: must be a finite duration such as 10ms, 100ms or 1s"
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value <= 0:
+        return None, f"bad {what} {value!r}: must be greater than zero"
+    try:
+        seconds = parse_duration(value)
+    except (ValueError, TypeError):
+        return None, f"bad {what} {value!r}: write a duration such as 10ms, 100ms or 1s"
+    if seconds <= 0:
+        return None, f"bad {what} {value!r}: must be greater than zero"
+    return seconds, ""
 
 
 def _is_name(text: str) -> bool:

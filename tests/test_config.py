@@ -10,7 +10,7 @@ import yaml
 
 from softplc.config import PlantConfig, load_config
 from softplc.datatypes import DataType
-from softplc.schema import CONFIG_SCHEMA
+from softplc.schema import config_schema
 from softplc.tags import Access
 
 from conftest import REPO
@@ -192,6 +192,7 @@ def test_default_plant() -> None:
 
 
 def test_schema_is_a_valid_json_schema_and_the_default_plant_validates() -> None:
+    CONFIG_SCHEMA = config_schema()
     jsonschema.Draft202012Validator.check_schema(CONFIG_SCHEMA)
     data = yaml.safe_load((REPO / "tagdb.yaml").read_text())
     errors = list(jsonschema.Draft202012Validator(CONFIG_SCHEMA).iter_errors(data))
