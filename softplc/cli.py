@@ -23,9 +23,10 @@ from typing import Any, TextIO
 from softplc import __version__
 from softplc.clock import RealClock, SimClock
 from softplc.config import PlantConfig, load_config
+from softplc.console import print_table
 from softplc.durations import format_duration
 from softplc.expression import Condition, ExpressionError
-from softplc.schema import editor_schema
+from softplc.sections import editor_schema
 from softplc.yamlsource import ConfigError
 
 EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
@@ -209,16 +210,6 @@ def cmd_tags(args: argparse.Namespace) -> int:
         cells = [{**row, "retain": "yes" if row["retain"] else None} for row in rows]
         print_table([[("" if cell[c] is None else str(cell[c])) for c in columns] for cell in cells], columns)
     return EXIT_OK
-
-
-def print_table(rows: list[list[str]], header: tuple[str, ...] | list[str], stream: TextIO | None = None) -> None:
-    """Print rows as an aligned plain-text table."""
-    stream = stream or sys.stdout
-    widths = [max([len(h)] + [len(row[i]) for row in rows]) for i, h in enumerate(header)]
-    print("  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip(), file=stream)
-    print("  ".join("-" * w for w in widths), file=stream)
-    for row in rows:
-        print("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip(), file=stream)
 
 
 # -- run ------------------------------------------------------------------------------------

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from softplc.durations import parse_duration
-from softplc.schema import DURATION
-from softplc.sections import Section
+from softplc.durations import check_duration
+from softplc.schema import DURATION, Section
 
 if TYPE_CHECKING:
-    from softplc.config import PlantConfig
+    from softplc.config.plant import PlantConfig
     from softplc.yamlsource import Problem
 
 SCHEMA: dict[str, Any] = {
@@ -27,14 +26,8 @@ def problems(config: PlantConfig) -> list[Problem]:
     section = config.section("runtime")
     if section is None or "stall_after" not in section:
         return []
-    value = section["stall_after"]
-    try:
-        seconds = parse_duration(value)
-    except (TypeError, ValueError):
-        return [config.problem(("runtime", "stall_after"), f"bad stall_after {value!r}: write a duration such as 10ms, 100ms or 1s")]
-    if seconds <= 0:
-        return [config.problem(("runtime", "stall_after"), f"bad stall_after {value!r}: must be greater than zero")]
-    return []
+    _, message = check_duration(section["stall_after"], "stall_after")
+    return [config.problem(("runtime", "stall_after"), message)] if message else []
 
 
 SECTION = Section(path=("runtime",), schema=SCHEMA, problems=problems)

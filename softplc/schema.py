@@ -1,19 +1,24 @@
-"""The JSON Schema of `tagdb.yaml` (printed by `softplc schema`, used by `softplc check`).
+"""The JSON Schema of `tagdb.yaml`, and the `Section` with which a module declares its part of it.
 
 The core's sections (plant, tags, templates, tasks) are declared here; every other section,
-and the keys adapters add to tags, templates and programs, come from their owners through
-`softplc.sections`. What a schema cannot say (a binding to a missing tag, an initial value
-outside its type, a program class that does not exist) is checked in `softplc.config`.
+and the keys adapters add to tags, templates and programs, come from their owners, which
+`softplc.sections` lists (it assembles what `softplc check` uses and `softplc schema` prints).
+What a schema cannot say (a binding to a missing tag, an initial value outside its type, a
+program class that does not exist) is checked in `softplc.config`.
 """
 
 from __future__ import annotations
 
-import functools
-from typing import Any
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from softplc.datatypes import TYPE_NAMES
 from softplc.durations import DURATION_REGEX
-from softplc.sections import RegistryError, Section, program_keys, registered, tag_keys, template_keys
+
+if TYPE_CHECKING:
+    from softplc.config.plant import PlantConfig
+    from softplc.yamlsource import Problem
 
 NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
 NAME_RULE = "letters, digits and _, not starting with a digit"
@@ -36,6 +41,11 @@ TAG: dict[str, Any] = {
         "max": {"type": "number", "description": "Highest value a write may set."},
         "retain": {"type": "boolean", "description": "Keep the value across restarts (stored in SQLite)."},
         "group": {"type": "string", "description": "Folder path for browsing, e.g. Plant/Handshake."},
+        "shared_output": {
+            "type": "boolean",
+            "description": "Several programs may write this tag (a handshake flag one sets and another clears, a counter "
+            "each increments); without it a second writing program is an error.",
+        },
     },
     "required": ["type"],
     "additionalProperties": False,
@@ -122,25 +132,61 @@ TASK: dict[str, Any] = {
     "additionalProperties": False,
 }
 
+class RegistryError(RuntimeError):
+    """Two owners claim the same section or key (a programming error, not the user's)."""
+
+
+@dataclass(frozen=True)
+class Section:
+    """One owner's part of the configuration file."""
+
+    path: tuple[str, ...]  # where its mapping lives, e.g. ("servers", "modbus")
+    schema: dict[str, Any]  # the JSON Schema of that mapping
+    # Keys the owner adds to every tag (plain or in a template): key → JSON Schema of its value.
+    tag_keys: Mapping[str, dict[str, Any]] = field(default_factory=dict)
+    # Keys the owner adds to every template: the value applies to each tag of the template
+    # (a tag's own key, if it has one, wins; two mappings are merged key by key).
+    template_keys: Mapping[str, dict[str, Any]] = field(default_factory=dict)
+    # Keys the owner adds to every program of a task (values land in ProgramConfig.options[key]).
+    program_keys: Mapping[str, dict[str, Any]] = field(default_factory=dict)
+    # What the schema cannot say (a bad duration's text, overlapping addresses, a missing
+    # file), as located problems. Runs only on a configuration whose core is free of problems.
+    problems: Callable[[PlantConfig], list[Problem]] | None = None
+
+
+class RegistryError(RuntimeError):
+    """Two owners claim the same section or key (a programming error, not the user's)."""
+
+
+def check_registry(sections: tuple[Section, ...]) -> tuple[Section, ...]:
+    """`sections`, after making sure no path, tag key or template key is claimed twice."""
+    for what, keys in (("section", [s.path for s in sections]), ("tag key", [k for s in sections for k in s.tag_keys]),
+                       ("template key", [k for s in sections for k in s.template_keys]),
+                       ("program key", [k for s in sections for k in s.program_keys])):
+        doubles = sorted({str(key) for key in keys if keys.count(key) > 1})
+        if doubles:
+            raise RegistryError(f"{what} claimed by two owners: {', '.join(doubles)}")
+    paths = [s.path for s in sections]
+    for path in paths:
+        if any(other != path and other == path[: len(other)] for other in paths):
+            raise RegistryError(f"section {'.'.join(path)} lies inside another owner's section")
+    return sections
+
+
 # Containers of owners' sections that are not sections themselves (e.g. servers: opcua, modbus).
 CONTAINERS: dict[str, str] = {"servers": "Protocol servers: each one's settings under its name."}
 
 CORE_SECTIONS = ("version", "plant", "templates", "tags", "tasks")
 
 
-@functools.cache
-def config_schema() -> dict[str, Any]:
-    """The whole file's schema: the core's sections plus every registered owner's."""
-    return build_schema(registered())
-
-
 def build_schema(sections: tuple[Section, ...]) -> dict[str, Any]:
     """The file's schema with these owners' sections and tag, template and program keys."""
-    # Copies along the changed paths only: editor_schema() finds DURATION by identity.
-    tag = {**TAG, "properties": {**TAG["properties"], **_added(TAG, tag_keys(sections))}}
+    check_registry(sections)
+    # Copies along the changed paths only: strict_durations() finds DURATION by identity.
+    tag = {**TAG, "properties": {**TAG["properties"], **_added(TAG, [s.tag_keys for s in sections])}}
     tags = {**TAGS, "additionalProperties": tag}
-    template = {**TEMPLATE, "properties": {**TEMPLATE["properties"], "tags": tags, **_added(TEMPLATE, template_keys(sections))}}
-    program = {**PROGRAM, "properties": {**PROGRAM["properties"], **_added(PROGRAM, program_keys(sections))}}
+    template = {**TEMPLATE, "properties": {**TEMPLATE["properties"], "tags": tags, **_added(TEMPLATE, [s.template_keys for s in sections])}}
+    program = {**PROGRAM, "properties": {**PROGRAM["properties"], **_added(PROGRAM, [s.program_keys for s in sections])}}
     task = {**TASK, "properties": {**TASK["properties"], "programs": {**TASK["properties"]["programs"], "items": program}}}
     properties: dict[str, Any] = {
         "version": {"const": 1, "description": "Format version; 1."},
@@ -171,8 +217,9 @@ def build_schema(sections: tuple[Section, ...]) -> dict[str, Any]:
     }
 
 
-def _added(core: dict[str, Any], keys: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+def _added(core: dict[str, Any], owned: list[Mapping[str, dict[str, Any]]]) -> dict[str, dict[str, Any]]:
     """Owners' keys for a core mapping; a key the core already has is a programming error."""
+    keys = {key: schema for mapping in owned for key, schema in mapping.items()}
     clashes = sorted(set(keys) & set(core["properties"]))
     if clashes:
         raise RegistryError(f"key claimed by an owner but belonging to the core: {', '.join(clashes)}")
@@ -190,8 +237,8 @@ STRICT_DURATION: dict[str, Any] = {
 }
 
 
-def editor_schema() -> dict[str, Any]:
-    """The schema `softplc schema` prints: config_schema() with durations checked for their form too."""
+def strict_durations(schema: dict[str, Any]) -> dict[str, Any]:
+    """`schema` with durations checked for their form too (what `softplc schema` prints)."""
 
     def strict(node: Any) -> Any:
         if node is DURATION:
@@ -202,4 +249,4 @@ def editor_schema() -> dict[str, Any]:
             return [strict(item) for item in node]
         return node
 
-    return strict(config_schema())
+    return strict(schema)

@@ -6,12 +6,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from softplc.config import check_duration
-from softplc.schema import DURATION
-from softplc.sections import Section
+from softplc.durations import check_duration
+from softplc.schema import DURATION, Section
 
 if TYPE_CHECKING:
-    from softplc.config import PlantConfig
+    from softplc.config.plant import PlantConfig
     from softplc.yamlsource import Problem
 
 SCHEMA: dict[str, Any] = {

@@ -15,7 +15,7 @@ import pytest
 from softplc import schema, sections
 from softplc.cli import main
 from softplc.config import load_config
-from softplc.sections import RegistryError, Section
+from softplc.schema import RegistryError, Section
 from softplc.yamlsource import ConfigError
 
 from conftest import REPO
@@ -25,7 +25,7 @@ HEAVY = ("asyncua", "pymodbus", "numpy", "scipy", "sklearn", "matplotlib", "json
 
 def _reset() -> None:
     sections.registered.cache_clear()
-    schema.config_schema.cache_clear()
+    sections.config_schema.cache_clear()
 
 
 @pytest.fixture
@@ -70,7 +70,7 @@ PLANT = f"""\
 
 def test_every_owner_module_is_light_to_import() -> None:
     # Loading a configuration imports every owner; `softplc --help` and `softplc schema` must stay fast.
-    script = ("import sys, json; from softplc.schema import editor_schema; editor_schema(); "
+    script = ("import sys, json; from softplc.sections import editor_schema; editor_schema(); "
               f"print(json.dumps(sorted({{n.split('.')[0] for n in sys.modules}} & set({list(HEAVY)!r}))))")
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=REPO, timeout=60, check=True)
     assert json.loads(result.stdout) == []
@@ -80,7 +80,7 @@ def test_the_existing_owners_are_registered_with_their_sections_and_keys() -> No
     paths = [section.path for section in sections.registered()]
     assert paths == [("runtime",), ("servers", "opcua"), ("servers", "modbus"), ("fleet",)]
     assert set(sections.tag_keys()) == {"modbus"}
-    properties = schema.config_schema()["properties"]
+    properties = sections.config_schema()["properties"]
     assert set(properties["servers"]["properties"]) == {"opcua", "modbus"}
     assert "modbus" in properties["tags"]["additionalProperties"]["properties"]
 
@@ -95,7 +95,7 @@ def test_a_new_owner_plugs_in_its_section_tag_template_and_program_keys(with_his
     assert config.tag("plain").options == {}
     assert config.tasks[0].programs[0].options == {"record": True}
     # and `softplc schema` tells editors about it
-    printed = schema.editor_schema()
+    printed = sections.editor_schema()
     assert "history" in printed["properties"] and "record" in json.dumps(printed)
     jsonschema.Draft202012Validator.check_schema(printed)
 
@@ -106,7 +106,7 @@ def test_without_its_owner_the_keys_are_unknown(tmp_path: Path) -> None:
         load_config(path)
     assert [str(p) for p in caught.value.problems] == [
         f"{path}:2:1: unknown key 'history'; expected one of: version, plant, templates, tags, tasks, runtime, servers, fleet",
-        f"{path}:4:22: unknown key 'history'; expected one of: type, initial, unit, description, access, min, max, retain, group, modbus",
+        f"{path}:4:22: unknown key 'history'; expected one of: type, initial, unit, description, access, min, max, retain, group, shared_output, modbus",
     ]
 
 
@@ -141,11 +141,11 @@ def test_an_owners_schema_and_its_check_report_located_problems(with_history, tm
 def test_owners_cannot_claim_the_same_section_or_key_or_a_core_one() -> None:
     modbus = Section(path=("servers", "modbus"), schema={}, tag_keys={"modbus": {}})
     with pytest.raises(RegistryError, match="section claimed by two owners"):
-        sections.check_registry((modbus, Section(path=("servers", "modbus"), schema={})))
+        schema.check_registry((modbus, Section(path=("servers", "modbus"), schema={})))
     with pytest.raises(RegistryError, match="tag key claimed by two owners: modbus"):
-        sections.check_registry((modbus, Section(path=("other",), schema={}, tag_keys={"modbus": {}})))
+        schema.check_registry((modbus, Section(path=("other",), schema={}, tag_keys={"modbus": {}})))
     with pytest.raises(RegistryError, match="inside another owner's section"):
-        sections.check_registry((Section(path=("fleet",), schema={}), Section(path=("fleet", "x"), schema={})))
+        schema.check_registry((Section(path=("fleet",), schema={}), Section(path=("fleet", "x"), schema={})))
     with pytest.raises(RegistryError, match="belongs to the core"):
         schema.build_schema((Section(path=("tags",), schema={}),))
     with pytest.raises(RegistryError, match="belonging to the core: unit"):

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from softplc.schema import DURATION, NAME_PATTERN
-from softplc.sections import Section
+from softplc.schema import DURATION, NAME_PATTERN, Section
 
 if TYPE_CHECKING:
-    from softplc.config import PlantConfig
+    from softplc.config.plant import PlantConfig
     from softplc.yamlsource import Problem
 
 SCHEMA: dict[str, Any] = {

@@ -5,11 +5,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from softplc.modbus.settings import ModbusSettings, settings_problems
-from softplc.schema import DURATION
-from softplc.sections import Section
+from softplc.schema import DURATION, Section
 
 if TYPE_CHECKING:
-    from softplc.config import PlantConfig
+    from softplc.config.plant import PlantConfig
     from softplc.yamlsource import Problem
 
 SCHEMA: dict[str, Any] = {

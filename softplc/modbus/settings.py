@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 from softplc.durations import parse_duration
 
 if TYPE_CHECKING:
-    from softplc.config import PlantConfig
+    from softplc.config.plant import PlantConfig
     from softplc.yamlsource import Problem
 
 DEFAULT_HOST = "127.0.0.1"

@@ -5,10 +5,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from softplc.opcua.settings import POLICIES, OpcUaSettings, SettingsError
-from softplc.sections import Section
+from softplc.schema import Section
 
 if TYPE_CHECKING:
-    from softplc.config import PlantConfig
+    from softplc.config.plant import PlantConfig
     from softplc.yamlsource import Problem
 
 SCHEMA: dict[str, Any] = {
