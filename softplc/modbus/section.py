@@ -14,10 +14,10 @@ if TYPE_CHECKING:
 SCHEMA: dict[str, Any] = {
     "type": "object",
     "properties": {
-        "enabled": {"type": "boolean"},
-        "host": {"type": "string"},
-        "port": {"type": "integer", "minimum": 0, "maximum": 65535},
-        "unit_id": {"type": "integer", "minimum": 0, "maximum": 247},
+        "enabled": {"type": "boolean", "description": "false: no Modbus TCP server (default true)."},
+        "host": {"type": "string", "description": "Bind address (default 127.0.0.1)."},
+        "port": {"type": "integer", "minimum": 0, "maximum": 65535, "description": "TCP port (default 5020; 0 = any free port, as under --sim)."},
+        "unit_id": {"type": "integer", "minimum": 0, "maximum": 247, "description": "Unit id served (default 1)."},
         "word_order": {"enum": ["big", "little"], "description": "Order of the 16-bit words of 32/64-bit values."},
         "string_words": {"type": "integer", "minimum": 1, "maximum": 123, "description": "Registers per string tag (default 16)."},
         "system_tags": {"type": "boolean", "description": "Serve the _sys. tags (default true)."},

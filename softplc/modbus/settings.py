@@ -30,7 +30,7 @@ DEFAULT_IDLE_TIMEOUT = 60.0
 class ModbusSettings:
     """Where and how the Modbus server serves (see docs/modbus.md)."""
 
-    enabled: bool = False
+    enabled: bool = True
     host: str = DEFAULT_HOST
     port: int = DEFAULT_PORT
     unit_id: int = DEFAULT_UNIT_ID
@@ -45,7 +45,8 @@ class ModbusSettings:
     def from_servers(cls, servers: dict[str, Any]) -> ModbusSettings:
         """Settings from the `servers:` section (already checked by the schema).
 
-        The server is enabled when a `modbus:` section exists and does not say `enabled: false`.
+        The server is on unless `servers.modbus` says `enabled: false`, like the OPC UA server:
+        a plant without a `servers:` section serves both, on loopback and the default ports.
         """
         section = servers.get("modbus")
         if not isinstance(section, dict):

@@ -138,6 +138,12 @@ class OpcUaSettings:
         """A copy with the given fields replaced (None values are ignored)."""
         return replace(self, **{key: value for key, value in changes.items() if value is not None})
 
+    def with_port(self, port: int) -> OpcUaSettings:
+        """A copy whose endpoint has this port (0: any free port), host and path unchanged."""
+        host, _, path = self.parsed_endpoint()
+        netloc = f"[{host}]" if ":" in host else host
+        return replace(self, endpoint=f"opc.tcp://{netloc}:{port}{path}")
+
     # -- derived ------------------------------------------------------------------------
 
     def parsed_endpoint(self) -> tuple[str, int, str]:
