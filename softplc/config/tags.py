@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -135,25 +136,8 @@ class TagChecker:
             data_type = DataType(spec.get("type"))
         except ValueError:
             return  # the schema already reported the unknown type
-        ok = True
         low, high = spec.get("min"), spec.get("max")
-        for bound_name, bound in (("min", low), ("max", high)):
-            if isinstance(bound, (int, float)) and not isinstance(bound, bool):
-                if not data_type.is_numeric:
-                    problem((*path, bound_name), f"'{bound_name}' is only allowed for numeric tags, not {data_type.value}", at_key=True)
-                    ok = False
-                elif bound != bound:
-                    problem((*path, bound_name), f"{bound_name} must be a number, not NaN")
-                    ok = False
-                else:
-                    try:
-                        data_type.coerce(bound)
-                    except TypeMismatch as error:
-                        problem((*path, bound_name), f"{bound_name} {bound}: {error}")
-                        ok = False
-        if isinstance(low, (int, float)) and isinstance(high, (int, float)) and low > high:
-            problem((*path, "min"), f"min {low} is greater than max {high}")
-            ok = False
+        ok = self._bounds_ok(data_type, low, high, path, problem)
         if initial_override is not None:
             initial, initial_path = initial_override
         else:
@@ -164,18 +148,17 @@ class TagChecker:
             initial = data_type.coerce(initial)
         except TypeMismatch as error:
             problem(initial_path, f"initial value of '{name}' is invalid: {error}")
-            ok = False
-        else:
-            if data_type.is_numeric and ok:
-                if initial != initial and (low is not None or high is not None):
-                    problem(initial_path, f"initial value of '{name}' is NaN, which is outside the range of a bounded tag")
-                    ok = False
-                elif isinstance(low, (int, float)) and initial < low:
-                    problem(initial_path, f"initial value {initial} of '{name}' is below its min {low}{hint}")
-                    ok = False
-                if isinstance(high, (int, float)) and initial > high:
-                    problem(initial_path, f"initial value {initial} of '{name}' is above its max {high}{hint}")
-                    ok = False
+            return
+        if data_type.is_numeric and ok:
+            if initial != initial and (low is not None or high is not None):
+                problem(initial_path, f"initial value of '{name}' is NaN, which is outside the range of a bounded tag")
+                return
+            if isinstance(low, (int, float)) and initial < low:
+                problem(initial_path, f"initial value {initial} of '{name}' is below its min {low}{hint}")
+                ok = False
+            if isinstance(high, (int, float)) and initial > high:
+                problem(initial_path, f"initial value {initial} of '{name}' is above its max {high}{hint}")
+                ok = False
         if not ok:
             return
         options = dict(template_options or {})
@@ -197,3 +180,27 @@ class TagChecker:
             options=options,
         )
         self.tag_paths[name] = path
+
+    @staticmethod
+    def _bounds_ok(data_type: DataType, low: Any, high: Any, path: tuple[Any, ...], problem: Callable[..., None]) -> bool:
+        """min and max fit the type and each other (each mistake recorded)."""
+        ok = True
+        for bound_name, bound in (("min", low), ("max", high)):
+            if not isinstance(bound, (int, float)) or isinstance(bound, bool):
+                continue
+            if not data_type.is_numeric:
+                problem((*path, bound_name), f"'{bound_name}' is only allowed for numeric tags, not {data_type.value}", at_key=True)
+                ok = False
+            elif bound != bound:
+                problem((*path, bound_name), f"{bound_name} must be a number, not NaN")
+                ok = False
+            else:
+                try:
+                    data_type.coerce(bound)
+                except TypeMismatch as error:
+                    problem((*path, bound_name), f"{bound_name} {bound}: {error}")
+                    ok = False
+        if isinstance(low, (int, float)) and isinstance(high, (int, float)) and low > high:
+            problem((*path, "min"), f"min {low} is greater than max {high}")
+            ok = False
+        return ok
