@@ -4,7 +4,7 @@ Each adapter module contributes its command-line flags to `run` (`add_run_argume
 builds itself from the configuration (`build_adapters`). The core never imports this module.
 
 Every protocol server is on by default, on loopback and its default port; `run` says which
-ones are off and how to turn them on. Under `--sim` a server whose port is not given on the
+ones are off and how to turn them on (`servers_off`). Under `--sim` a server whose port is not given on the
 command line binds port 0 (any free port, printed in its `serving:` line), so a simulation
 never collides with the plant running beside it: `simulation_port()` is that one rule.
 """
@@ -13,15 +13,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from softplc.config import PlantConfig
+    from softplc.modbus.settings import ModbusSettings
+    from softplc.opcua.settings import OpcUaSettings
     from softplc.runtime import Adapter
-
-log = logging.getLogger(__name__)
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     """Flags of `softplc run` that belong to adapters."""
@@ -62,33 +61,42 @@ def simulation_port(args: argparse.Namespace | None, *flags: str) -> int | None:
 def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) -> list[Adapter]:
     """The adapters to start for this plant, honouring command-line overrides in `args`.
 
-    With `args` (a `run`), the servers that are off are logged with how to turn them on.
     Raises one ConfigError with the problems of every adapter's section, not just the first's.
     """
     from softplc.yamlsource import ConfigError, Problem
 
-    off: list[str] = []
     builders = [_fleet]  # robots are not servers: --no-servers keeps them
-    if args is not None and getattr(args, "no_servers", False):
-        off.append("no protocol server (--no-servers): run without it to serve OPC UA and Modbus TCP")
-    else:
+    if not (args is not None and getattr(args, "no_servers", False)):
         builders += [_opcua, _modbus]
     adapters: list[Adapter] = []
     problems: list[Problem] = []
     for build in builders:
         try:
-            adapters.extend(build(config, args, off))
+            adapters.extend(build(config, args))
         except ConfigError as error:
             problems.extend(error.problems)
     if problems:
         raise ConfigError(problems)
-    if args is not None:
-        for note in off:
-            log.info("%s", note)
     return adapters
 
 
-def _modbus(config: PlantConfig, args: argparse.Namespace | None, off: list[str]) -> list[Adapter]:
+def servers_off(config: PlantConfig, args: argparse.Namespace | None = None) -> list[str]:
+    """The protocol servers this run does not start, each with why and how to turn it on."""
+    if args is not None and getattr(args, "no_servers", False):
+        return ["OPC UA and Modbus TCP (--no-servers): run without it to serve them"]
+    off = []
+    if getattr(args, "no_opcua", False):
+        off.append("OPC UA (--no-opcua)")
+    elif not _opcua_settings(config, args).enabled:
+        off.append(f"OPC UA (servers.opcua.enabled: false in {config.path.name}): set enabled: true to serve it")
+    if getattr(args, "no_modbus", False):
+        off.append("Modbus TCP (--no-modbus)")
+    elif not _modbus_settings(config, args).enabled:
+        off.append(f"Modbus TCP (servers.modbus.enabled: false in {config.path.name}): set enabled: true, or give --modbus-port PORT, to serve it")
+    return off
+
+
+def _modbus_settings(config: PlantConfig, args: argparse.Namespace | None) -> ModbusSettings:
     from softplc.modbus.settings import ModbusSettings
 
     settings = ModbusSettings.from_servers(config.servers).override(
@@ -97,21 +105,19 @@ def _modbus(config: PlantConfig, args: argparse.Namespace | None, off: list[str]
         disable=bool(getattr(args, "no_modbus", False)),
     )
     port = simulation_port(args, "modbus_port")
-    if port is not None:
-        settings = dataclasses.replace(settings, port=port)
+    return settings if port is None else dataclasses.replace(settings, port=port)
+
+
+def _modbus(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    settings = _modbus_settings(config, args)
     if not settings.enabled:  # its section, pinned addresses included, was checked with the configuration
-        if getattr(args, "no_modbus", False):
-            off.append("Modbus TCP off (--no-modbus)")
-        else:
-            off.append(f"Modbus TCP off (servers.modbus.enabled: false in {config.path.name}): set enabled: true, "
-                       "or give --modbus-port PORT, to serve it")
         return []
     from softplc.modbus.server import ModbusAdapter
 
     return [ModbusAdapter(config, settings)]
 
 
-def _opcua(config: PlantConfig, args: argparse.Namespace | None, off: list[str]) -> list[Adapter]:
+def _opcua_settings(config: PlantConfig, args: argparse.Namespace | None) -> OpcUaSettings:
     from softplc.opcua.settings import OpcUaSettings, SettingsError
     from softplc.yamlsource import ConfigError
 
@@ -130,20 +136,19 @@ def _opcua(config: PlantConfig, args: argparse.Namespace | None, off: list[str])
     except SettingsError as error:
         raise SystemExit(f"softplc: --opcua-{error.key.replace('_file', 's')}: {error}") from None
     port = simulation_port(args, "opcua_endpoint")
-    if port is not None:
-        settings = settings.with_port(port)
-    if bool(getattr(args, "no_opcua", False)):
-        off.append("OPC UA off (--no-opcua)")
-        return []
-    if not settings.enabled:
-        off.append(f"OPC UA off (servers.opcua.enabled: false in {config.path.name}): set enabled: true to serve it")
+    return settings if port is None else settings.with_port(port)
+
+
+def _opcua(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    settings = _opcua_settings(config, args)
+    if not settings.enabled or bool(getattr(args, "no_opcua", False)):
         return []
     from softplc.opcua.server import OpcUaServer
 
     return [OpcUaServer(settings)]
 
 
-def _fleet(config: PlantConfig, args: argparse.Namespace | None, off: list[str]) -> list[Adapter]:
+def _fleet(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
     from softplc.fleet.settings import FleetSettings
 
     if not FleetSettings.configured(config) or bool(getattr(args, "no_fleet", False)):

@@ -324,6 +324,10 @@ async def _status_loop(runtime: Any, show: bool, args: argparse.Namespace) -> No
         print(f"serving: {adapter.describe()}", file=sys.stderr)
     if not runtime.adapters:
         print("serving: nothing (no server enabled)", file=sys.stderr)
+    from softplc.adapters import servers_off
+
+    for note in servers_off(runtime.config, args):
+        print(f"not serving: {note}", file=sys.stderr)
     print("press Ctrl-C to stop", file=sys.stderr)
     last_error = ""
     while True:

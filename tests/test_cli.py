@@ -377,11 +377,18 @@ def test_run_says_which_servers_are_off_and_how_to_turn_them_on(cli, tmp_path: P
     plant.write_text(PLANT + "servers:\n  opcua: {enabled: false}\n  modbus: {enabled: false}\n")
     code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path)
     assert code == 0, err
-    assert "softplc: INFO: OPC UA off (servers.opcua.enabled: false in plant.yaml): set enabled: true to serve it" in err
-    assert ("softplc: INFO: Modbus TCP off (servers.modbus.enabled: false in plant.yaml): set enabled: true, "
-            "or give --modbus-port PORT, to serve it") in err
-    code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path, "--no-servers")
-    assert "softplc: INFO: no protocol server (--no-servers): run without it to serve OPC UA and Modbus TCP" in err
+    lines = err.splitlines()
+    assert lines[1:5] == [
+        "serving: nothing (no server enabled)",
+        "not serving: OPC UA (servers.opcua.enabled: false in plant.yaml): set enabled: true to serve it",
+        "not serving: Modbus TCP (servers.modbus.enabled: false in plant.yaml): set enabled: true, or give --modbus-port PORT, to serve it",
+        "press Ctrl-C to stop",
+    ], err
+    code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path, "--no-servers", "--modbus-port", "0")
+    assert "not serving: OPC UA and Modbus TCP (--no-servers): run without it to serve them" in err.splitlines()
+    code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path, "--modbus-port", "0")
+    assert [line for line in err.splitlines() if line.startswith(("serving:", "not serving:"))][1:] == [
+        "not serving: OPC UA (servers.opcua.enabled: false in plant.yaml): set enabled: true to serve it"]
 
 
 def test_under_sim_servers_bind_free_ports_unless_a_flag_says_otherwise(plant: Path) -> None:
