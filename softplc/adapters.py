@@ -2,18 +2,25 @@
 
 Each adapter module contributes its command-line flags to `run` (`add_run_arguments`) and
 builds itself from the configuration (`build_adapters`). The core never imports this module.
+
+Every protocol server is on by default, on loopback and its default port; `run` says which
+ones are off and how to turn them on (`servers_off`). Under `--sim` a server whose port is not given on the
+command line binds port 0 (any free port, printed in its `serving:` line), so a simulation
+never collides with the plant running beside it: `simulation_port()` is that one rule.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from softplc.config import PlantConfig
+    from softplc.modbus.settings import ModbusSettings
+    from softplc.opcua.settings import OpcUaSettings
     from softplc.runtime import Adapter
-
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     """Flags of `softplc run` that belong to adapters."""
@@ -24,10 +31,10 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     from softplc.modbus.settings import port_number as modbus_port
 
     group.add_argument("--modbus-host", type=modbus_host, metavar="HOST", help="Modbus TCP bind address (default servers.modbus.host, 127.0.0.1)")
-    group.add_argument("--modbus-port", type=modbus_port, metavar="PORT", help="Modbus TCP port (default servers.modbus.port, 5020; 0 = any free port)")
+    group.add_argument("--modbus-port", type=modbus_port, metavar="PORT", help="Modbus TCP port (default servers.modbus.port, 5020; 0 = any free port, the default under --sim)")
     group.add_argument("--no-modbus", action="store_true", help="do not start the Modbus TCP server")
     # OPC UA (softplc.opcua)
-    group.add_argument("--opcua-endpoint", metavar="URL", help="OPC UA endpoint, e.g. opc.tcp://0.0.0.0:4840/softplc/ (default servers.opcua.endpoint; port 0 = any free port)")
+    group.add_argument("--opcua-endpoint", metavar="URL", help="OPC UA endpoint, e.g. opc.tcp://0.0.0.0:4840/softplc/ (default servers.opcua.endpoint; port 0 = any free port, the default under --sim)")
     group.add_argument("--opcua-security", metavar="LIST", help="comma-separated policies: None, Basic256Sha256_Sign, Basic256Sha256_SignAndEncrypt")
     group.add_argument("--opcua-anonymous", choices=("off", "viewer"), help="anonymous OPC UA sessions: refused, or read-only")
     group.add_argument("--opcua-users", type=Path, metavar="FILE", help="OPC UA users file (default servers.opcua.users_file, STATE_DIR/users.yaml)")
@@ -35,6 +42,20 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     # Robot fleet (softplc.fleet)
     robots = parser.add_argument_group("robots")
     robots.add_argument("--no-fleet", action="store_true", help="do not drive the robots of the fleet: section")
+
+
+def simulation_port(args: argparse.Namespace | None, *flags: str) -> int | None:
+    """0 (any free port) for a server of a `--sim` run none of whose `flags` is on the command line, else None.
+
+    None means: bind what the configuration (or the flag) says. Every server adapter asks this,
+    with the flags that set its port (e.g. "modbus_port"), so a simulation beside a running
+    plant never fails with "address already in use"; an explicit flag still wins.
+    """
+    if args is None or not getattr(args, "sim", False):
+        return None
+    if any(getattr(args, flag, None) is not None for flag in flags):
+        return None
+    return 0
 
 
 def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) -> list[Adapter]:
@@ -59,7 +80,23 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
     return adapters
 
 
-def _modbus(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+def servers_off(config: PlantConfig, args: argparse.Namespace | None = None) -> list[str]:
+    """The protocol servers this run does not start, each with why and how to turn it on."""
+    if args is not None and getattr(args, "no_servers", False):
+        return ["OPC UA and Modbus TCP (--no-servers): run without it to serve them"]
+    off = []
+    if getattr(args, "no_opcua", False):
+        off.append("OPC UA (--no-opcua)")
+    elif not _opcua_settings(config, args).enabled:
+        off.append(f"OPC UA (servers.opcua.enabled: false in {config.path.name}): set enabled: true to serve it")
+    if getattr(args, "no_modbus", False):
+        off.append("Modbus TCP (--no-modbus)")
+    elif not _modbus_settings(config, args).enabled:
+        off.append(f"Modbus TCP (servers.modbus.enabled: false in {config.path.name}): set enabled: true, or give --modbus-port PORT, to serve it")
+    return off
+
+
+def _modbus_settings(config: PlantConfig, args: argparse.Namespace | None) -> ModbusSettings:
     from softplc.modbus.settings import ModbusSettings
 
     settings = ModbusSettings.from_servers(config.servers).override(
@@ -67,27 +104,27 @@ def _modbus(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapte
         port=getattr(args, "modbus_port", None),
         disable=bool(getattr(args, "no_modbus", False)),
     )
-    if not settings.enabled:
-        if any("modbus" in tag.options for tag in config.tags):
-            from softplc.modbus.address_map import build_address_map
+    port = simulation_port(args, "modbus_port")
+    return settings if port is None else dataclasses.replace(settings, port=port)
 
-            build_address_map(config, settings)  # addresses pinned in the tags are checked even while the server is off
+
+def _modbus(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    settings = _modbus_settings(config, args)
+    if not settings.enabled:  # its section, pinned addresses included, was checked with the configuration
         return []
     from softplc.modbus.server import ModbusAdapter
 
     return [ModbusAdapter(config, settings)]
 
 
-def _opcua(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+def _opcua_settings(config: PlantConfig, args: argparse.Namespace | None) -> OpcUaSettings:
     from softplc.opcua.settings import OpcUaSettings, SettingsError
-    from softplc.yamlsource import ConfigError, Location, Problem
+    from softplc.yamlsource import ConfigError
 
     try:
-        settings = OpcUaSettings.from_section(config.servers.get("opcua"), config.base_dir)
+        settings = OpcUaSettings.from_section(config.section("servers", "opcua"), config.base_dir)
     except SettingsError as error:
-        path = ("servers", "opcua", error.key)
-        where = config.source.problem(path, str(error)) if config.source else Problem(Location(str(config.path), 1, 1), str(error))
-        raise ConfigError([where]) from None
+        raise ConfigError([config.problem(("servers", "opcua", error.key), str(error))]) from None
     security = getattr(args, "opcua_security", None)
     try:
         settings = settings.with_overrides(
@@ -98,6 +135,12 @@ def _opcua(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter
         )
     except SettingsError as error:
         raise SystemExit(f"softplc: --opcua-{error.key.replace('_file', 's')}: {error}") from None
+    port = simulation_port(args, "opcua_endpoint")
+    return settings if port is None else settings.with_port(port)
+
+
+def _opcua(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    settings = _opcua_settings(config, args)
     if not settings.enabled or bool(getattr(args, "no_opcua", False)):
         return []
     from softplc.opcua.server import OpcUaServer

@@ -23,9 +23,10 @@ from typing import TYPE_CHECKING, Any, TextIO
 from softplc import __version__
 from softplc.clock import RealClock, SimClock
 from softplc.config import PlantConfig, load_config
+from softplc.console import print_table
 from softplc.durations import format_duration
 from softplc.expression import Condition, ExpressionError
-from softplc.schema import editor_schema
+from softplc.sections import editor_schema
 from softplc.yamlsource import ConfigError
 
 if TYPE_CHECKING:
@@ -220,16 +221,6 @@ def cmd_tags(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def print_table(rows: list[list[str]], header: tuple[str, ...] | list[str], stream: TextIO | None = None) -> None:
-    """Print rows as an aligned plain-text table."""
-    stream = stream or sys.stdout
-    widths = [max([len(h)] + [len(row[i]) for row in rows]) for i, h in enumerate(header)]
-    print("  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip(), file=stream)
-    print("  ".join("-" * w for w in widths), file=stream)
-    for row in rows:
-        print("  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip(), file=stream)
-
-
 # -- run ------------------------------------------------------------------------------------
 
 
@@ -362,6 +353,10 @@ async def _status_loop(runtime: Any, show: bool, args: argparse.Namespace) -> No
         print(f"serving: {adapter.describe()}", file=sys.stderr)
     if not runtime.adapters:
         print("serving: nothing (no server enabled)", file=sys.stderr)
+    from softplc.adapters import servers_off
+
+    for note in servers_off(runtime.config, args):
+        print(f"not serving: {note}", file=sys.stderr)
     print("press Ctrl-C to stop", file=sys.stderr)
     last_error = ""
     while True:

@@ -1,15 +1,24 @@
-"""The JSON Schema of `tagdb.yaml` (printed by `softplc schema`, used by `softplc check`).
+"""The JSON Schema of `tagdb.yaml`, and the `Section` with which a module declares its part of it.
 
-Structure is checked here; what a schema cannot say (a binding to a missing tag, an initial
-value outside its type, a program class that does not exist) is checked in `config.py`.
+The core's sections (plant, tags, templates, tasks) are declared here; every other section,
+and the keys adapters add to tags, templates and programs, come from their owners, which
+`softplc.sections` lists (it assembles what `softplc check` uses and `softplc schema` prints).
+What a schema cannot say (a binding to a missing tag, an initial value outside its type, a
+program class that does not exist) is checked in `softplc.config`.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from softplc.datatypes import TYPE_NAMES
 from softplc.durations import DURATION_REGEX
+
+if TYPE_CHECKING:
+    from softplc.config.plant import PlantConfig
+    from softplc.yamlsource import Problem
 
 NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
 NAME_RULE = "letters, digits and _, not starting with a digit"
@@ -17,24 +26,6 @@ NAME_RULE = "letters, digits and _, not starting with a digit"
 DURATION: dict[str, Any] = {
     "description": "A duration: 10ms, 1s, 2min, 250us, or a number of seconds.",
     "type": ["string", "number"],
-}
-
-MODBUS_TAG: dict[str, Any] = {
-    "description": "Modbus TCP mapping overrides for this tag.",
-    "type": "object",
-    "properties": {
-        "table": {"enum": ["coil", "discrete_input", "holding", "input"], "description": "Register table."},
-        "address": {"type": "integer", "minimum": 0, "maximum": 65535, "description": "0-based start address."},
-        "scale": {"type": "number", "exclusiveMinimum": 0, "description": "Register = round(value * scale)."},
-        "register_type": {
-            "enum": ["int16", "uint16", "int32", "uint32", "float32", "float64"],
-            "description": "The register encoding when it differs from the tag's type (e.g. a scaled float in int16).",
-        },
-        "words": {"type": "integer", "minimum": 1, "maximum": 123, "description": "Registers for a string tag (2 UTF-8 bytes each; 123 = one FC16 write)."},
-        "word_order": {"enum": ["big", "little"], "description": "Word order of this tag's 32/64-bit value (default servers.modbus.word_order)."},
-        "enabled": {"type": "boolean", "description": "false: not served over Modbus."},
-    },
-    "additionalProperties": False,
 }
 
 TAG: dict[str, Any] = {
@@ -50,7 +41,11 @@ TAG: dict[str, Any] = {
         "max": {"type": "number", "description": "Highest value a write may set."},
         "retain": {"type": "boolean", "description": "Keep the value across restarts (stored in SQLite)."},
         "group": {"type": "string", "description": "Folder path for browsing, e.g. Plant/Handshake."},
-        "modbus": MODBUS_TAG,
+        "shared_output": {
+            "type": "boolean",
+            "description": "Several programs may write this tag (a handshake flag one sets and another clears, a counter "
+            "each increments); without it a second writing program is an error.",
+        },
     },
     "required": ["type"],
     "additionalProperties": False,
@@ -137,100 +132,98 @@ TASK: dict[str, Any] = {
     "additionalProperties": False,
 }
 
-OPCUA_SERVER: dict[str, Any] = {
-    "type": "object",
-    "properties": {
-        "enabled": {"type": "boolean", "description": "false: no OPC UA server (default true)."},
-        "endpoint": {"type": "string", "description": "opc.tcp://HOST:PORT/PATH (default opc.tcp://127.0.0.1:4840/softplc/; port 0 = any free port)."},
-        "namespace": {"type": "string", "description": "Namespace URI of the tags (default urn:softplc:tags)."},
-        "application_uri": {"type": "string", "description": "ApplicationUri of the server, also in its certificate (default urn:softplc:server)."},
-        "security": {
-            "type": "array",
-            "minItems": 1,
-            "items": {"enum": ["None", "Basic256Sha256_Sign", "Basic256Sha256_SignAndEncrypt"]},
-            "description": "Security policies offered (default: all three on a loopback endpoint, the two Basic256Sha256 modes elsewhere).",
-        },
-        "anonymous": {"enum": ["off", "viewer"], "description": "Anonymous sessions: refused, or read-only (default viewer on loopback, off elsewhere)."},
-        "users_file": {"type": "string", "description": "Users, roles and password hashes, relative to this file (default STATE_DIR/users.yaml; softplc users ...)."},
-        "pki_dir": {"type": "string", "description": "Server certificate and trusted/rejected client certificates (default STATE_DIR/pki)."},
-        "certificate": {"type": "string", "description": "Use this server certificate (DER or PEM) instead of generating one; needs private_key."},
-        "private_key": {"type": "string", "description": "Private key (PEM) of `certificate`."},
-        "folder_size": {"type": "integer", "minimum": 10, "maximum": 10000, "description": "Most children per folder before it is split (default 100)."},
-        "max_message_size": {"type": "integer", "minimum": 65536, "maximum": 268435456, "description": "Largest request in bytes, all chunks together (default 4194304); 64 KB before a session is activated."},
-        "max_chunk_count": {"type": "integer", "minimum": 1, "maximum": 8192, "description": "Most chunks of one request (default 512)."},
-        "max_connections_per_peer": {"type": "integer", "minimum": 1, "maximum": 1000, "description": "Most simultaneous connections from one IP address; more are refused (default 50)."},
-    },
-    "additionalProperties": False,
-}
+class RegistryError(RuntimeError):
+    """Two owners claim the same section or key (a programming error, not the user's)."""
 
-MODBUS_SERVER: dict[str, Any] = {
-    "type": "object",
-    "properties": {
-        "enabled": {"type": "boolean"},
-        "host": {"type": "string"},
-        "port": {"type": "integer", "minimum": 0, "maximum": 65535},
-        "unit_id": {"type": "integer", "minimum": 0, "maximum": 247},
-        "word_order": {"enum": ["big", "little"], "description": "Order of the 16-bit words of 32/64-bit values."},
-        "string_words": {"type": "integer", "minimum": 1, "maximum": 123, "description": "Registers per string tag (default 16)."},
-        "system_tags": {"type": "boolean", "description": "Serve the _sys. tags (default true)."},
-        "system_base": {"type": "integer", "minimum": 0, "maximum": 65535, "description": "First address of the _sys. tag block in each table (default 60000)."},
-        "max_connections": {"type": "integer", "minimum": 1, "maximum": 4096, "description": "Most simultaneous client connections; more are refused (default 64)."},
-        "idle_timeout": {**DURATION, "description": "Close a connection that sent nothing for this long; 0 = never (default 60s)."},
-    },
-    "additionalProperties": False,
-}
 
-FLEET: dict[str, Any] = {
-    "description": "Mobile robots driven by the runtime (softplc.fleet; docs/robots.md).",
-    "type": "object",
-    "properties": {
-        "enabled": {"type": "boolean", "description": "false: no robot is driven (default true)."},
-        "robots": {"type": "string", "description": "Robots file, relative to this one (default robots/robots.yaml)."},
-        "tasks": {"type": "string", "description": "Tasks file (default robots/tasks.yaml)."},
-        "map": {"type": "string", "description": "Occupancy map YAML, ROS map_server format (default robots/maps/factory.yaml)."},
-        "template": {"type": "string", "pattern": NAME_PATTERN, "description": "Template whose instances are the robots' tags (default robot)."},
-        "cycle": DURATION,
-        "max_linear_speed": {"type": "number", "exclusiveMinimum": 0, "description": "Floor speed limit, m/s (default 0.2)."},
-        "max_angular_speed": {"type": "number", "exclusiveMinimum": 0, "description": "Floor turn-rate limit, rad/s (default 0.4)."},
-        "planning_resolution": {"type": "number", "exclusiveMinimum": 0, "description": "Cell size of the A* grid, m (default 0.1)."},
-        "goal_tolerance": {"type": "number", "exclusiveMinimum": 0, "description": "Goal reached within this distance, m (default 0.5)."},
-        "heartbeat_timeout": DURATION,
-    },
-    "additionalProperties": False,
-}
+@dataclass(frozen=True)
+class Section:
+    """One owner's part of the configuration file."""
 
-CONFIG_SCHEMA: dict[str, Any] = {
-    "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "$id": "https://softplc.dev/schema/tagdb.json",
-    "title": "softplc plant configuration (tagdb.yaml)",
-    "type": "object",
-    "properties": {
+    path: tuple[str, ...]  # where its mapping lives, e.g. ("servers", "modbus")
+    schema: dict[str, Any]  # the JSON Schema of that mapping
+    # Keys the owner adds to every tag (plain or in a template): key → JSON Schema of its value.
+    tag_keys: Mapping[str, dict[str, Any]] = field(default_factory=dict)
+    # Keys the owner adds to every template: the value applies to each tag of the template
+    # (a tag's own key, if it has one, wins; two mappings are merged key by key).
+    template_keys: Mapping[str, dict[str, Any]] = field(default_factory=dict)
+    # Keys the owner adds to every program of a task (values land in ProgramConfig.options[key]).
+    program_keys: Mapping[str, dict[str, Any]] = field(default_factory=dict)
+    # What the schema cannot say (a bad duration's text, overlapping addresses, a missing
+    # file), as located problems. Runs only on a configuration whose core is free of problems.
+    problems: Callable[[PlantConfig], list[Problem]] | None = None
+
+
+class RegistryError(RuntimeError):
+    """Two owners claim the same section or key (a programming error, not the user's)."""
+
+
+def check_registry(sections: tuple[Section, ...]) -> tuple[Section, ...]:
+    """`sections`, after making sure no path, tag key or template key is claimed twice."""
+    for what, keys in (("section", [s.path for s in sections]), ("tag key", [k for s in sections for k in s.tag_keys]),
+                       ("template key", [k for s in sections for k in s.template_keys]),
+                       ("program key", [k for s in sections for k in s.program_keys])):
+        doubles = sorted({str(key) for key in keys if keys.count(key) > 1})
+        if doubles:
+            raise RegistryError(f"{what} claimed by two owners: {', '.join(doubles)}")
+    paths = [s.path for s in sections]
+    for path in paths:
+        if any(other != path and other == path[: len(other)] for other in paths):
+            raise RegistryError(f"section {'.'.join(path)} lies inside another owner's section")
+    return sections
+
+
+# Containers of owners' sections that are not sections themselves (e.g. servers: opcua, modbus).
+CONTAINERS: dict[str, str] = {"servers": "Protocol servers: each one's settings under its name."}
+
+CORE_SECTIONS = ("version", "plant", "templates", "tags", "tasks")
+
+
+def build_schema(sections: tuple[Section, ...]) -> dict[str, Any]:
+    """The file's schema with these owners' sections and tag, template and program keys."""
+    check_registry(sections)
+    # Copies along the changed paths only: strict_durations() finds DURATION by identity.
+    tag = {**TAG, "properties": {**TAG["properties"], **_added(TAG, [s.tag_keys for s in sections])}}
+    tags = {**TAGS, "additionalProperties": tag}
+    template = {**TEMPLATE, "properties": {**TEMPLATE["properties"], "tags": tags, **_added(TEMPLATE, [s.template_keys for s in sections])}}
+    program = {**PROGRAM, "properties": {**PROGRAM["properties"], **_added(PROGRAM, [s.program_keys for s in sections])}}
+    task = {**TASK, "properties": {**TASK["properties"], "programs": {**TASK["properties"]["programs"], "items": program}}}
+    properties: dict[str, Any] = {
         "version": {"const": 1, "description": "Format version; 1."},
         "plant": {
             "type": "object",
             "properties": {"name": {"type": "string"}, "description": {"type": "string"}},
             "additionalProperties": False,
         },
-        "templates": {"type": "object", "propertyNames": {"pattern": NAME_PATTERN}, "additionalProperties": TEMPLATE},
-        "tags": TAGS,
-        "tasks": {"type": "object", "propertyNames": {"pattern": NAME_PATTERN}, "additionalProperties": TASK},
-        "servers": {
-            "type": "object",
-            "properties": {"opcua": OPCUA_SERVER, "modbus": MODBUS_SERVER},
-            "additionalProperties": False,
-        },
-        "fleet": FLEET,
-        "runtime": {
-            "type": "object",
-            "properties": {
-                "state_dir": {"type": "string", "description": "Where retained values, certificates etc. live (default .softplc next to this file)."},
-                "stall_after": DURATION,
-            },
-            "additionalProperties": False,
-        },
-    },
-    "additionalProperties": False,
-}
+        "templates": {"type": "object", "propertyNames": {"pattern": NAME_PATTERN}, "additionalProperties": template},
+        "tags": tags,
+        "tasks": {"type": "object", "propertyNames": {"pattern": NAME_PATTERN}, "additionalProperties": task},
+    }
+    for section in sections:
+        if section.path[0] in CORE_SECTIONS or section.path in [(name,) for name in CONTAINERS]:
+            raise RegistryError(f"section {'.'.join(section.path)} belongs to the core")
+        parent = properties
+        for key in section.path[:-1]:
+            container = parent.setdefault(key, {"description": CONTAINERS.get(key, ""), "type": "object", "properties": {}, "additionalProperties": False})
+            parent = container["properties"]
+        parent[section.path[-1]] = section.schema
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "$id": "https://softplc.dev/schema/tagdb.json",
+        "title": "softplc plant configuration (tagdb.yaml)",
+        "type": "object",
+        "properties": properties,
+        "additionalProperties": False,
+    }
+
+
+def _added(core: dict[str, Any], owned: list[Mapping[str, dict[str, Any]]]) -> dict[str, dict[str, Any]]:
+    """Owners' keys for a core mapping; a key the core already has is a programming error."""
+    keys = {key: schema for mapping in owned for key, schema in mapping.items()}
+    clashes = sorted(set(keys) & set(core["properties"]))
+    if clashes:
+        raise RegistryError(f"key claimed by an owner but belonging to the core: {', '.join(clashes)}")
+    return keys
 
 
 # For editors: durations are also checked for their form (the runtime's own check says more:
@@ -244,8 +237,8 @@ STRICT_DURATION: dict[str, Any] = {
 }
 
 
-def editor_schema() -> dict[str, Any]:
-    """The schema `softplc schema` prints: CONFIG_SCHEMA with durations checked for their form too."""
+def strict_durations(schema: dict[str, Any]) -> dict[str, Any]:
+    """`schema` with durations checked for their form too (what `softplc schema` prints)."""
 
     def strict(node: Any) -> Any:
         if node is DURATION:
@@ -256,4 +249,4 @@ def editor_schema() -> dict[str, Any]:
             return [strict(item) for item in node]
         return node
 
-    return strict(CONFIG_SCHEMA)
+    return strict(schema)

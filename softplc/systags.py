@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from softplc.config import SYSTEM_PREFIX, TaskConfig
+from softplc.config.plant import SYSTEM_PREFIX, TaskConfig
 from softplc.datatypes import DataType
 from softplc.scan import ScanEngine
 from softplc.tagdb import TagDatabase

@@ -42,7 +42,7 @@ class ConfigError(Exception):
     """A configuration has one or more problems; `problems` lists them all."""
 
     def __init__(self, problems: Sequence[Problem]) -> None:
-        self.problems = sorted(problems)
+        self.problems = sorted(set(problems))  # the same mistake found twice is said once
         super().__init__("\n".join(str(problem) for problem in self.problems))
 
 

@@ -10,7 +10,7 @@ import yaml
 
 from softplc.config import PlantConfig, load_config
 from softplc.datatypes import DataType
-from softplc.schema import CONFIG_SCHEMA
+from softplc.sections import config_schema
 from softplc.tags import Access
 
 from conftest import REPO
@@ -192,6 +192,7 @@ def test_default_plant() -> None:
 
 
 def test_schema_is_a_valid_json_schema_and_the_default_plant_validates() -> None:
+    CONFIG_SCHEMA = config_schema()
     jsonschema.Draft202012Validator.check_schema(CONFIG_SCHEMA)
     data = yaml.safe_load((REPO / "tagdb.yaml").read_text())
     errors = list(jsonschema.Draft202012Validator(CONFIG_SCHEMA).iter_errors(data))
@@ -200,3 +201,48 @@ def test_schema_is_a_valid_json_schema_and_the_default_plant_validates() -> None
     data["tsks"] = data.pop("tasks")
     assert list(jsonschema.Draft202012Validator(CONFIG_SCHEMA).iter_errors(data))
     assert json.loads(json.dumps(CONFIG_SCHEMA)) == CONFIG_SCHEMA  # serialisable as printed
+
+
+def test_shared_outputs_and_disabled_programs_are_not_double_writes(make_config) -> None:
+    config = make_config(
+        f"""
+        version: 1
+        templates:
+          line:
+            instances: [l1, l2]
+            tags:
+              count: {{type: uint32, shared_output: true}}   # a counter both programs increment
+        tags:
+          a: {{type: float64}}
+          handshake: {{type: float64, shared_output: true}}  # one sets it, the other clears it
+          spare: {{type: float64}}
+        tasks:
+          fast:
+            interval: 10ms
+            programs:
+              - {{name: set, program: "{PROGRAMS}:Mixer", params: {{recipe: x}}, bind: {{source: a, target: handshake}}}}
+              - {{name: count_a, program: "{PROGRAMS}:Summer", bind: {{parts: [a], total: spare, scans: l1_count}}}}
+          slow:
+            interval: 1s
+            programs:
+              - {{name: clear, program: "{PROGRAMS}:Mixer", params: {{recipe: y}}, bind: {{source: a, target: handshake}}}}
+              - {{name: count_b, program: "{PROGRAMS}:Summer", bind: {{parts: [a], total: a, scans: l1_count}}}}
+              - {{name: old, program: "{PROGRAMS}:Mixer", params: {{recipe: z}}, enabled: false, bind: {{source: a, target: spare}}}}
+        """
+    )
+    assert config.program_count == 5
+
+
+def test_every_shipped_plant_and_scenario_writes_each_output_from_one_program_or_says_it_is_shared() -> None:
+    from softplc.latency.plant import SCENARIO_NAMES, handshake_config
+    from softplc.scenarios.plant import build_plant
+    from softplc.scenarios.spec import builtin_scenarios, load_scenario
+
+    load_config(REPO / "tagdb.yaml")
+    for scenario in SCENARIO_NAMES:
+        handshake_config(scenario, 0.01)
+    paths = builtin_scenarios()
+    assert len(paths) >= 12
+    for path in paths:
+        scenario = load_scenario(path)
+        build_plant(scenario, [[1] * len(scenario.tasks) for _ in scenario.robots])

@@ -279,7 +279,9 @@ def test_run_flags_build_or_skip_the_modbus_adapter(make_config, capsys):
     moved = [a for a in build_adapters(config, parser.parse_args(["run", "--no-opcua", "--modbus-port", "0", "--modbus-host", "0.0.0.0"])) if a.name == "modbus"]
     assert (moved[0].settings.host, moved[0].settings.port) == ("0.0.0.0", 0)
     assert not [a for a in build_adapters(config, parser.parse_args(["run", "--no-opcua", "--no-modbus"])) if a.name == "modbus"]
-    assert not [a for a in build_adapters(make_config(BASE), parser.parse_args(["run", "--no-opcua"])) if a.name == "modbus"]
+    # no servers: section: served on loopback and the default port, like OPC UA (issue 14, item 19)
+    default = [a for a in build_adapters(make_config(BASE), parser.parse_args(["run", "--no-opcua"])) if a.name == "modbus"]
+    assert (default[0].settings.host, default[0].settings.port) == ("127.0.0.1", 5020)
     with pytest.raises(SystemExit):
         parser.parse_args(["run", "--modbus-port", "70000"])
     assert "port 70000 is outside 0..65535" in capsys.readouterr().err

@@ -166,13 +166,14 @@ BROKEN = f"""
 version: 1
 tags:
   out: {{type: int32}}
+  exit_out: {{type: int32}}
   n: {{type: uint32}}
 tasks:
   fast:
     interval: 10ms
     programs:
       - {{name: bad_setup, program: "{CORE}:BadSetup", bind: {{out: out}}}}
-      - {{name: exiter, program: "{CORE}:Exiter", bind: {{out: out}}}}
+      - {{name: exiter, program: "{CORE}:Exiter", bind: {{out: exit_out}}}}
       - {{name: count, program: "{CORE}:Counter", bind: {{count: n}}}}
 """
 

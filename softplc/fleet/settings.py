@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from softplc.config import PlantConfig
 from softplc.durations import parse_duration
 from softplc.yamlsource import ConfigError
+
+if TYPE_CHECKING:
+    from softplc.config.plant import PlantConfig
 
 DEFAULT_ROBOTS = "robots/robots.yaml"
 DEFAULT_TASKS = "robots/tasks.yaml"

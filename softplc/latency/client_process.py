@@ -13,10 +13,12 @@ import collections
 import json
 import logging
 import os
+import sys
 import time
 from pathlib import Path
 
-from softplc.latency.measurement import Measurement, Progress, Sample, Target, client_command, interrupted
+from softplc.latency.results import Measurement, Progress, Sample, interrupted
+from softplc.latency.target import Target
 
 log = logging.getLogger(__name__)
 
@@ -206,3 +208,21 @@ def _unanswered_note(result: Measurement, ready_stamp: float | None) -> str:
     if after >= 0:
         return f"a Ready the PLC set {after:.1f} s after the client ended, never answered"
     return f"a Ready pending since {-after:.1f} s before the client ended, never answered"
+
+
+def client_command(target: Target, endpoint: str) -> list[str]:
+    """argv of the client process."""
+    argv = [sys.executable, "-m", "softplc.latency.client", "--protocol", target.protocol, "--endpoint", endpoint,
+            "--mode", target.mode, "--timeout", f"{target.ready_timeout():g}",
+            "--poll-interval", f"{target.poll_interval_ms:g}", "--publishing-interval", f"{target.publishing_interval_ms:g}",
+            "--unit-id", str(target.unit_id), "--word-order", target.word_order]
+    if target.samples is not None:
+        argv += ["--samples", str(target.samples)]
+    if target.duration is not None:
+        argv += ["--duration", f"{target.duration:g}"]
+    for tag in target.tags:
+        argv += ["--tag", tag]
+    for option, value in (("--namespace", target.namespace), ("--security", target.security), ("--user", target.user)):
+        if value:
+            argv += [option, value]
+    return argv

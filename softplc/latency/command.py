@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING, Any, TextIO
 from softplc.latency.plant import SCENARIO_NAMES, PlantMissing, scenario_durations
 
 if TYPE_CHECKING:
-    from softplc.latency.measurement import Measurement, Target
+    from softplc.latency.results import Measurement
+    from softplc.latency.target import Target
 
 EXIT_OK, EXIT_FAILURE = 0, 1
 MIN_SCAN_MS = 0.1  # the runtime's shortest task interval
@@ -92,7 +93,7 @@ def add_commands(commands: argparse._SubParsersAction) -> None:  # type: ignore[
 def targets(args: argparse.Namespace) -> list[Target]:
     """One Target per protocol × scenario asked for; raises ValueError on a contradiction."""
     from softplc.latency.endpoint import guess_protocol, parse_endpoint
-    from softplc.latency.measurement import Target
+    from softplc.latency.target import Target
 
     protocols = ["opcua", "modbus"] if args.protocol == "all" else [args.protocol]
     if args.endpoint is not None:

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from softplc.latency.measurement import Target
+    from softplc.latency.target import Target
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,8 @@ from typing import TYPE_CHECKING, TextIO
 from softplc.latency.plant import scenario_durations
 
 if TYPE_CHECKING:
-    from softplc.latency.measurement import Measurement, Target
+    from softplc.latency.results import Measurement
+    from softplc.latency.target import Target
 
 REDRAW_INTERVAL = 0.5  # s
 CLEAR_LINE = "\r\033[K"

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
-from softplc.latency.measurement import Measurement, Sample
+from softplc.latency.results import Measurement, Sample
 from softplc.latency.progress import plural
 from softplc.latency.statistics import DelayStatistics, share_at_most, summarize
 

@@ -26,7 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from softplc.config import SYSTEM_PREFIX, PlantConfig
+from softplc.config.plant import SYSTEM_PREFIX, PlantConfig
 from softplc.datatypes import DataType
 from softplc.modbus.codec import REGISTER_TYPES, RegisterCodec, register_words
 from softplc.modbus.settings import ModbusSettings

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 from softplc.durations import parse_duration
 
 if TYPE_CHECKING:
-    from softplc.config import PlantConfig
+    from softplc.config.plant import PlantConfig
     from softplc.yamlsource import Problem
 
 DEFAULT_HOST = "127.0.0.1"
@@ -30,7 +30,7 @@ DEFAULT_IDLE_TIMEOUT = 60.0
 class ModbusSettings:
     """Where and how the Modbus server serves (see docs/modbus.md)."""
 
-    enabled: bool = False
+    enabled: bool = True
     host: str = DEFAULT_HOST
     port: int = DEFAULT_PORT
     unit_id: int = DEFAULT_UNIT_ID
@@ -45,7 +45,8 @@ class ModbusSettings:
     def from_servers(cls, servers: dict[str, Any]) -> ModbusSettings:
         """Settings from the `servers:` section (already checked by the schema).
 
-        The server is enabled when a `modbus:` section exists and does not say `enabled: false`.
+        The server is on unless `servers.modbus` says `enabled: false`, like the OPC UA server:
+        a plant without a `servers:` section serves both, on loopback and the default ports.
         """
         section = servers.get("modbus")
         if not isinstance(section, dict):
@@ -60,7 +61,7 @@ class ModbusSettings:
             system_tags=bool(section.get("system_tags", True)),
             system_base=int(section.get("system_base", DEFAULT_SYSTEM_BASE)),
             max_connections=int(section.get("max_connections", DEFAULT_MAX_CONNECTIONS)),
-            # A bad duration is reported with its location by settings_problems (ModbusAdapter).
+            # A bad duration is reported with its location by settings_problems (softplc.modbus.section).
             idle_timeout=_seconds(section.get("idle_timeout", DEFAULT_IDLE_TIMEOUT)) or 0.0,
         )
 
@@ -78,21 +79,16 @@ class ModbusSettings:
 
 def settings_problems(config: PlantConfig) -> list[Problem]:
     """Located mistakes in `servers.modbus` that the schema cannot see (a duration's text, a host's form)."""
-    section = config.servers.get("modbus")
-    if not isinstance(section, dict):
+    section = config.section("servers", "modbus")
+    if section is None:
         return []
-    from softplc.yamlsource import Location, Problem
-
     found: list[tuple[str, str]] = []
     if "idle_timeout" in section and _seconds(section["idle_timeout"]) is None:
         value = section["idle_timeout"]
         found.append(("idle_timeout", f"bad idle_timeout {value!r}: write a duration such as 60s or 5min, or 0 to never close idle connections"))
     if isinstance(section.get("host"), str) and not is_host(section["host"]):
         found.append(("host", f"bad host {section['host']!r}: write an IP address (127.0.0.1, 0.0.0.0, ::1) or a host name"))
-    return [
-        config.source.problem(("servers", "modbus", key), message) if config.source else Problem(Location(str(config.path), 1, 1), message)
-        for key, message in found
-    ]
+    return [config.problem(("servers", "modbus", key), message) for key, message in found]
 
 
 _HOST_LABEL = re.compile(r"^[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?$")

@@ -9,14 +9,16 @@ clients, unless the YAML says otherwise (None on a non-loopback address is logge
 from __future__ import annotations
 
 import ipaddress
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlparse
 
-from asyncua import ua
+from softplc.roles import Role
 
-from softplc.opcua.roles import Role
+if TYPE_CHECKING:
+    from asyncua import ua
 
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/softplc/"
 DEFAULT_NAMESPACE = "urn:softplc:tags"
@@ -32,11 +34,29 @@ DEFAULT_MAX_CONNECTIONS_PER_PEER = 50
 POLICY_NONE = "None"
 POLICY_SIGN = "Basic256Sha256_Sign"
 POLICY_ENCRYPT = "Basic256Sha256_SignAndEncrypt"
-POLICIES: dict[str, ua.SecurityPolicyType] = {
-    POLICY_NONE: ua.SecurityPolicyType.NoSecurity,
-    POLICY_SIGN: ua.SecurityPolicyType.Basic256Sha256_Sign,
-    POLICY_ENCRYPT: ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
-}
+_POLICY_TYPES = {POLICY_NONE: "NoSecurity", POLICY_SIGN: "Basic256Sha256_Sign", POLICY_ENCRYPT: "Basic256Sha256_SignAndEncrypt"}
+
+
+class _PolicyTypes(Mapping[str, "ua.SecurityPolicyType"]):
+    """Policy name → asyncua's SecurityPolicyType, imported on first lookup: every configuration
+    load checks these settings (softplc.opcua.section), and must not pay for asyncua."""
+
+    def __contains__(self, name: object) -> bool:
+        return name in _POLICY_TYPES
+
+    def __getitem__(self, name: str) -> ua.SecurityPolicyType:
+        from asyncua import ua
+
+        return getattr(ua.SecurityPolicyType, _POLICY_TYPES[name])
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(_POLICY_TYPES)
+
+    def __len__(self) -> int:
+        return len(_POLICY_TYPES)
+
+
+POLICIES: Mapping[str, ua.SecurityPolicyType] = _PolicyTypes()
 POLICY_TEXT = {POLICY_NONE: "None", POLICY_SIGN: "Basic256Sha256 Sign", POLICY_ENCRYPT: "Basic256Sha256 SignAndEncrypt"}
 
 
@@ -118,6 +138,12 @@ class OpcUaSettings:
         """A copy with the given fields replaced (None values are ignored)."""
         return replace(self, **{key: value for key, value in changes.items() if value is not None})
 
+    def with_port(self, port: int) -> OpcUaSettings:
+        """A copy whose endpoint has this port (0: any free port), host and path unchanged."""
+        host, _, path = self.parsed_endpoint()
+        netloc = f"[{host}]" if ":" in host else host
+        return replace(self, endpoint=f"opc.tcp://{netloc}:{port}{path}")
+
     # -- derived ------------------------------------------------------------------------
 
     def parsed_endpoint(self) -> tuple[str, int, str]:
@@ -171,3 +197,4 @@ class OpcUaSettings:
 
     def pki_path(self, state_dir: Path) -> Path:
         return self.pki_dir if self.pki_dir is not None else state_dir / "pki"
+

@@ -28,7 +28,8 @@ ROBOT_TAGS: dict[str, dict[str, Any]] = {
     "ygoal": {"type": "float64", "unit": "m", "description": "y goal"},
     "loadcap": {"type": "uint16", "unit": "items", "description": "load capacity"},
     "load": {"type": "uint16", "unit": "items", "description": "current load"},
-    "loadstat": {"type": "bool", "description": "loading/unloading done"},
+    # the plant sets it when loading is done, the sequencer clears it: a handshake, shared on purpose
+    "loadstat": {"type": "bool", "description": "loading/unloading done", "shared_output": True},
     "tnext": {"type": "uint16", "description": "task chosen by the dispatcher for the next trip (0 = none)"},
 }
 
@@ -60,7 +61,8 @@ TASK_TAGS: dict[str, dict[str, Any]] = {
     "dest_x": {"type": "float64", "unit": "m", "description": "destination x"},
     "dest_y": {"type": "float64", "unit": "m", "description": "destination y"},
     "Tw": {"type": "float64", "access": "ro", "description": "task weight (or assignment cost) from the dispatcher"},
-    "goals": {"type": "uint32", "access": "ro", "description": "goals issued for this task"},
+    # every robot's sequencer adds its goals (an InOut in one task): shared on purpose
+    "goals": {"type": "uint32", "access": "ro", "description": "goals issued for this task", "shared_output": True},
 }
 
 PLANT_INTERVAL = "100ms"

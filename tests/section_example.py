@@ -1,0 +1,51 @@
+"""A section owner written the way a new adapter writes one: `history:` at the top level, a
+`history:` key on tags and templates, and a `record:` key on programs. tests/test_config_sections.py
+plugs it into the registry (softplc.sections.SECTION_MODULES)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from softplc.durations import check_duration
+from softplc.schema import DURATION, Section
+
+if TYPE_CHECKING:
+    from softplc.config.plant import PlantConfig
+    from softplc.yamlsource import Problem
+
+SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "properties": {"database": {"type": "string"}, "interval": DURATION},
+    "additionalProperties": False,
+}
+
+TAG_KEY: dict[str, Any] = {
+    "type": "object",
+    "properties": {"deadband": {"type": "number", "minimum": 0}, "enabled": {"type": "boolean"}},
+    "additionalProperties": False,
+}
+
+
+def problems(config: PlantConfig) -> list[Problem]:
+    found = []
+    section = config.section("history")
+    if section is not None and "interval" in section:
+        _, message = check_duration(section["interval"], "interval")
+        if message:
+            found.append(config.problem(("history", "interval"), message))
+    for tag in config.tags:
+        options = tag.options.get("history")
+        if isinstance(options, dict) and "deadband" in options and not tag.type.is_numeric:
+            found.append(config.problem((*config.option_path(tag.name, "history"), "deadband"),
+                                        f"a deadband needs a numeric tag, and '{tag.name}' is {tag.type.value}"))
+    return found
+
+
+SECTION = Section(
+    path=("history",),
+    schema=SCHEMA,
+    tag_keys={"history": TAG_KEY},
+    template_keys={"history": TAG_KEY},
+    program_keys={"record": {"type": "boolean"}},
+    problems=problems,
+)

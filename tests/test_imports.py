@@ -1,0 +1,108 @@
+"""No import cycles inside softplc: every module can be read, tested and changed from the bottom up.
+
+The graph counts every import statement (at module level, inside functions and under
+TYPE_CHECKING: each is a dependency, even when Python would tolerate the cycle at run time)
+and the registries that name modules as strings (`COMMAND_MODULES`, `SECTION_MODULES`, the
+lazy `_MODULES` of package `__init__`s): a module listed there is imported by the registry's
+owner. Importing `a.b.c` also runs `a/__init__` and `a/b/__init__`; those implicit edges are
+not counted, or every package would be a cycle with its own modules.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+from conftest import REPO
+
+PACKAGE = REPO / "softplc"
+
+
+def module_files() -> dict[str, tuple[Path, bool]]:
+    """Module name → (file, is a package)."""
+    modules = {}
+    for file in PACKAGE.rglob("*.py"):
+        parts = list(file.relative_to(REPO).with_suffix("").parts)
+        is_package = parts[-1] == "__init__"
+        modules[".".join(parts[:-1] if is_package else parts)] = (file, is_package)
+    return modules
+
+
+def import_graph() -> dict[str, set[str]]:
+    """softplc module → the softplc modules it imports (see the module docstring)."""
+    modules = module_files()
+    graph: dict[str, set[str]] = {}
+    for name, (file, is_package) in modules.items():
+        edges: set[str] = set()
+        for node in ast.walk(ast.parse(file.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                edges.update(alias.name for alias in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:  # relative: from the package of this module
+                    package = name.split(".") if is_package else name.split(".")[:-1]
+                    base = ".".join(package[: len(package) - node.level + 1] + ([base] if base else []))
+                edges.add(base)
+                edges.update(f"{base}.{alias.name}" for alias in node.names)  # `from pkg import module`
+            elif isinstance(node, (ast.Assign, ast.AnnAssign)) and node.value is not None:
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                if any(isinstance(target, ast.Name) and target.id.endswith("_MODULES") for target in targets):
+                    edges.update(c.value for c in ast.walk(node.value) if isinstance(c, ast.Constant) and isinstance(c.value, str))
+        graph[name] = {edge for edge in edges if edge in modules and edge != name}
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for target in sorted(graph[node]):
+            if target not in index:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in on_stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return found
+
+
+def test_no_import_cycle_inside_softplc() -> None:
+    graph = import_graph()
+    found = cycles(graph)
+    explained = ["\n".join(f"  {m} -> {', '.join(sorted(graph[m] & set(cycle)))}" for m in cycle) for cycle in found]
+    assert not found, "import cycles:\n" + "\n\n".join(explained)
+
+
+def test_the_graph_sees_every_kind_of_import() -> None:
+    graph = import_graph()
+    assert "softplc.config.plant" in graph["softplc.sections"]  # under TYPE_CHECKING
+    assert "softplc.latency.client_process" in graph["softplc.latency.measurement"]  # inside a function
+    assert "softplc.opcua.cli" in graph["softplc.cli"]  # COMMAND_MODULES
+    assert "softplc.modbus.section" in graph["softplc.sections"]  # SECTION_MODULES
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_command_modules_print_tables_without_the_top_level_cli() -> None:
+    graph = import_graph()
+    assert [name for name, targets in graph.items() if "softplc.cli" in targets] == []
