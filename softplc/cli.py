@@ -187,12 +187,12 @@ def cmd_schema(args: argparse.Namespace) -> int:
 
 
 def cmd_tags(args: argparse.Namespace) -> int:
-    from softplc.systags import system_tag_definitions
+    from softplc.systags import runtime_tag_definitions
 
     config = load_config(args.config)
     definitions = list(config.tags)
     if not args.no_system:
-        definitions += system_tag_definitions(config.tasks)
+        definitions += runtime_tag_definitions(config)
     rows = [
         {
             "name": d.name,
@@ -238,10 +238,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     until = None
     runtime_probe_names = [d.name for d in config.tags]
     if args.until:
-        from softplc.systags import system_tag_definitions
+        from softplc.systags import runtime_tag_definitions
 
         try:
-            until = Condition(args.until, runtime_probe_names + [d.name for d in system_tag_definitions(config.tasks)])
+            until = Condition(args.until, runtime_probe_names + [d.name for d in runtime_tag_definitions(config)])
         except ExpressionError as error:
             print(f"softplc: --until: {error}", file=sys.stderr)
             return EXIT_CONFIG

@@ -18,10 +18,9 @@ the HMI's "F").
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from softplc.tagdb import Origin
+from softplc.origin import Origin
 
 
 @dataclass(frozen=True, slots=True)

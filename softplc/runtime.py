@@ -29,7 +29,7 @@ from softplc.retain import RetainStore, open_retained
 from softplc.runtime_commands import register_runtime_commands
 from softplc.scan import ProgramInstance, ProgramState, ScanEngine, Task
 from softplc.stall import StallDetector
-from softplc.systags import SystemTags, system_tag_definitions
+from softplc.systags import SystemTags, runtime_tag_definitions
 from softplc.tagdb import TagDatabase, WriteRejected
 from softplc.yamlsource import ConfigError, Location, Problem
 
@@ -84,7 +84,7 @@ class Runtime:
         self.config = config
         self.clock = clock or RealClock()
         self.state_dir = state_dir or config.state_dir
-        self.db = TagDatabase([*config.tags, *system_tag_definitions(config.tasks)], self.clock.wall)
+        self.db = TagDatabase([*config.tags, *runtime_tag_definitions(config)], self.clock.wall)
         self.tasks = [self._build_task(task) for task in config.tasks]
         self.engine = ScanEngine(self.clock, self.db, self.tasks)
         self.engine.after_cycle(self._after_cycle)

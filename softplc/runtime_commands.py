@@ -10,19 +10,26 @@ A value may be given typed (JSON from the HMI) or as text (`3.5`, `true`), parse
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol
 
-from softplc.commands import CommandRefused, Permission
+from softplc.commands import CommandRefused, Commands, Permission
 from softplc.datatypes import TypeMismatch
-from softplc.scan import ProgramState
-from softplc.tagdb import Origin, WriteRejected
-
-if TYPE_CHECKING:
-    from softplc.runtime import Runtime
+from softplc.scan import ProgramState, Task
+from softplc.tagdb import Origin, TagDatabase, WriteRejected
 
 
-def register_runtime_commands(runtime: Runtime) -> None:
+class _Runtime(Protocol):
+    """What these commands use of `softplc.runtime.Runtime` (which imports this module)."""
+
+    commands: Commands
+    db: TagDatabase
+    tasks: Sequence[Task]
+
+    def reset_faults(self) -> None: ...
+
+
+def register_runtime_commands(runtime: _Runtime) -> None:
     commands, db = runtime.commands, runtime.db
 
     def reset_faults(arguments: Mapping[str, Any], origin: Origin) -> str:

@@ -17,6 +17,7 @@ from softplc.datatypes import TYPE_NAMES
 from softplc.durations import DURATION_REGEX
 
 if TYPE_CHECKING:
+    from softplc.tags import TagDef
     from softplc.config.plant import PlantConfig
     from softplc.yamlsource import Problem
 
@@ -132,9 +133,6 @@ TASK: dict[str, Any] = {
     "additionalProperties": False,
 }
 
-class RegistryError(RuntimeError):
-    """Two owners claim the same section or key (a programming error, not the user's)."""
-
 
 @dataclass(frozen=True)
 class Section:
@@ -152,6 +150,9 @@ class Section:
     # What the schema cannot say (a bad duration's text, overlapping addresses, a missing
     # file), as located problems. Runs only on a configuration whose core is free of problems.
     problems: Callable[[PlantConfig], list[Problem]] | None = None
+    # Tags the owner adds to the runtime, like the system tags (e.g. alarm summary tags under
+    # `_sys.`): served over every protocol, listed by `softplc tags`, usable in --until.
+    tags: Callable[[PlantConfig], list[TagDef]] | None = None
 
 
 class RegistryError(RuntimeError):

@@ -21,6 +21,7 @@ from softplc.schema import Section, build_schema, check_registry, strict_duratio
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
+    from softplc.tags import TagDef
     from softplc.yamlsource import Problem
 
 # Modules that own a section (each defines SECTION), in the order their problems are reported.
@@ -62,6 +63,15 @@ def section_problems(config: PlantConfig, sections: tuple[Section, ...] | None =
         if section.problems is not None:
             problems.extend(section.problems(config))
     return problems
+
+
+def contributed_tags(config: PlantConfig, sections: tuple[Section, ...] | None = None) -> list[TagDef]:
+    """The tags the owners add to the runtime of this (valid) configuration, in registry order."""
+    tags: list[TagDef] = []
+    for section in registered() if sections is None else sections:
+        if section.tags is not None:
+            tags.extend(section.tags(config))
+    return tags
 
 
 @functools.cache

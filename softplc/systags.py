@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from softplc.config.plant import SYSTEM_PREFIX, TaskConfig
+from softplc.config.plant import SYSTEM_PREFIX, PlantConfig, TaskConfig
 from softplc.datatypes import DataType
 from softplc.scan import ScanEngine
 from softplc.tagdb import TagDatabase
@@ -60,6 +60,11 @@ def system_tag_definitions(tasks: list[TaskConfig]) -> list[TagDef]:
             definitions.append(_tag(program_prefix + "error", DataType.STRING, f"program {program.name}: last error", group=group))
             definitions.append(_tag(program_prefix + "faults", DataType.UINT32, f"program {program.name}: faults so far", group=group))
     return definitions
+
+
+def runtime_tag_definitions(config: PlantConfig) -> list[TagDef]:
+    """The tags a runtime adds to the plant's own: the system tags and those the section owners contribute."""
+    return [*system_tag_definitions(config.tasks), *config.contributed_tags]
 
 
 class SystemTags:

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from softplc.datatypes import DataType
 from softplc.durations import check_duration
 from softplc.schema import DURATION, Section
+from softplc.tags import Access, TagDef
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
@@ -41,6 +43,13 @@ def problems(config: PlantConfig) -> list[Problem]:
     return found
 
 
+def tags(config: PlantConfig) -> list[TagDef]:
+    """A tag the owner adds to the runtime, like the alarm summary tags."""
+    if config.section("history") is None:
+        return []
+    return [TagDef("_sys.history.rows", DataType.UINT32, 0, description="rows recorded", access=Access.RO, runtime_only=True)]
+
+
 SECTION = Section(
     path=("history",),
     schema=SCHEMA,
@@ -48,4 +57,5 @@ SECTION = Section(
     template_keys={"history": TAG_KEY},
     program_keys={"record": {"type": "boolean"}},
     problems=problems,
+    tags=tags,
 )

@@ -14,6 +14,7 @@ import pytest
 
 from softplc import schema, sections
 from softplc.cli import main
+from softplc.roles import Role
 from softplc.config import load_config
 from softplc.schema import RegistryError, Section
 from softplc.yamlsource import ConfigError
@@ -150,3 +151,21 @@ def test_owners_cannot_claim_the_same_section_or_key_or_a_core_one() -> None:
         schema.build_schema((Section(path=("tags",), schema={}),))
     with pytest.raises(RegistryError, match="belonging to the core: unit"):
         schema.build_schema((Section(path=("x",), schema={}, tag_keys={"unit": {}}),))
+
+
+def test_an_owner_adds_tags_to_the_runtime_like_the_system_tags(with_history, tmp_path: Path, capsys) -> None:
+    from softplc.clock import SimClock
+    from softplc.modbus.address_map import Table, build_address_map
+    from softplc.modbus.settings import ModbusSettings
+    from softplc.runtime import Runtime
+
+    path = tmp_path / "plant.yaml"
+    path.write_text("version: 1\ntags: {level: {type: float32}}\nhistory: {database: h.sqlite}\nservers: {modbus: {}}\n")
+    config = load_config(path)
+    assert [tag.name for tag in config.contributed_tags] == ["_sys.history.rows"]
+    runtime = Runtime(config, SimClock(), state_dir=tmp_path / "state")
+    assert runtime.db.value("_sys.history.rows") == 0 and not runtime.db.writable("_sys.history.rows", Role.ENGINEER)
+    served = build_address_map(config, ModbusSettings.from_servers(config.servers))
+    assert "_sys.history.rows" in {mapping.name for table in Table for mapping in served.in_table(table)}
+    assert main(["tags", str(path), "--format", "json"]) == 0
+    assert "_sys.history.rows" in {row["name"] for row in json.loads(capsys.readouterr().out)}

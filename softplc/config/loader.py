@@ -16,7 +16,7 @@ from softplc.config.programs import ProgramChecker
 from softplc.config.schema_check import describe, schema_check
 from softplc.config.tags import TagChecker
 from softplc.config.tasks import TaskChecker
-from softplc.sections import config_schema, section_problems
+from softplc.sections import config_schema, contributed_tags, section_problems
 from softplc.yamlsource import ConfigError, SourceMap, load_yaml, parse_yaml
 
 
@@ -66,6 +66,7 @@ def check_config(path: Path, data: Any, source: SourceMap) -> PlantConfig:
         source=source,
         tag_paths=dict(tags.tag_paths),
     )
+    config.contributed_tags = contributed_tags(config)
     # The owners of the other sections check what their schema cannot say, on a plant whose
     # core is sound (so none of them reports a follow-on of a core mistake).
     problems = section_problems(config)

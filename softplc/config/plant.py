@@ -57,6 +57,8 @@ class PlantConfig:
     source: SourceMap | None = None
     # Where each tag is declared in the file: ("tags", NAME) or ("templates", T, "tags", NAME).
     tag_paths: dict[str, tuple[Any, ...]] = field(default_factory=dict)
+    # Tags the section owners add to the runtime besides the system tags (Section.tags).
+    contributed_tags: list[TagDef] = field(default_factory=list)
 
     @property
     def base_dir(self) -> Path:

@@ -30,7 +30,7 @@ from softplc.config.plant import SYSTEM_PREFIX, PlantConfig
 from softplc.datatypes import DataType
 from softplc.modbus.codec import REGISTER_TYPES, RegisterCodec, register_words
 from softplc.modbus.settings import ModbusSettings
-from softplc.systags import system_tag_definitions
+from softplc.systags import runtime_tag_definitions
 from softplc.tags import Access, TagDef
 from softplc.yamlsource import ConfigError, Location, Problem, SourceMap
 
@@ -240,7 +240,7 @@ class _Builder:
         if settings.system_tags:
             system_cursors = {table: settings.system_base for table in Table}
             left_out: list[str] = []
-            for tag in system_tag_definitions(self.config.tasks):
+            for tag in runtime_tag_definitions(self.config):
                 mapping = self._default_mapping(tag, system_cursors[_default_table(tag)], {}, pinned=False)
                 if mapping is None:
                     continue
