@@ -11,6 +11,7 @@ from programs.motion_sequencer import MotionSequencer
 from programs.optimal_dispatcher import OptimalAssignment
 from programs.task_weighting import TaskWeighting, lowest_weight, task_weight
 from softplc.clock import SimClock
+from softplc.fleet.arrival import GOAL_TOLERANCE
 from softplc.program import Program, ProgramContext
 
 
@@ -151,17 +152,49 @@ def test_sequencer_walks_a_full_trip():
     assert (program.currloc, program.tcurr, program.goals) == (1, 1, [1, 1])
 
 
-def test_sequencer_waits_until_the_robot_is_within_reach():
+def test_sequencer_takes_the_robot_by_the_fleets_arrival_rule():
+    # The driver clears status within GOAL_TOLERANCE; the sequencer must take the robot there too
+    # (with the thesis's 0.3 m, a robot stopped 0.45 m out by another robot on the station stood still for good).
+    assert GOAL_TOLERANCE == 0.5
     program = sequencer()
     program.tnext = 1
     program.scan()
-    program.status = False  # status cleared 0.5 m out, but the robot is still 0.4 m away
-    program.xpos, program.ypos = 3.5, 7.1
+    program.xpos, program.ypos = 3.5, 7.1  # 0.4 m short, still busy: travelling
     program.scan()
     assert program.currloc == 1
-    program.ypos = 7.25  # 0.25 m: within the thesis's 0.3 m
+    program.status = False  # the robot cleared status 0.45 m out (a robot on the station kept it there)
+    program.ypos = 7.05
     program.scan()
     assert program.currloc == 2
+
+
+def test_sequencer_asks_again_when_the_robot_gave_up():
+    program = sequencer()
+    program.retry_after = 10.0
+    program.tnext = 1
+    program.scan()
+    assert (program.currloc, program.status) == (1, True)
+    program.status = False  # the driver gave up (navstate failed) 2 m short of the source
+    program.xpos, program.ypos = 3.5, 5.5
+    program.clock._now = 100.0  # noqa: SLF001 (the simulated clock is stepped by hand here)
+    program.scan()
+    program.clock._now = 109.0  # noqa: SLF001
+    program.scan()
+    assert (program.currloc, program.status) == (1, False)  # neither arrived nor asked again yet
+    program.clock._now = 110.0  # noqa: SLF001
+    program.scan()
+    assert (program.currloc, program.status, program.xgoal, program.ygoal) == (1, True, 3.5, 7.5)  # same goal, busy again
+    assert program.goals == [1, 0]  # a retry is not a new goal
+
+
+def test_sequencer_gives_a_robot_whose_parking_failed_a_task():
+    program = sequencer(x=7.9, y=4.5)
+    program.scan()  # home is (7.9, 4.5)
+    program.xgoal, program.ygoal = 7.9, 4.5
+    program.xpos, program.ypos, program.status = 3.0, 3.0, False  # its drive home failed far from home
+    program.tnext = 2
+    program.scan()
+    assert (program.currloc, program.tcurr, program.status) == (1, 2, True)
 
 
 @pytest.mark.parametrize("tnext", [0, 3, 99])

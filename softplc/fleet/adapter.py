@@ -188,7 +188,6 @@ class FleetAdapter:
         max_linear_speed: float = 0.2,
         max_angular_speed: float = 0.4,
         planning_resolution: float = 0.1,
-        goal_tolerance: float = 0.5,
         heartbeat_timeout: float = 3.0,
         record: bool = False,
         settings: DriverSettings | None = None,
@@ -199,7 +198,7 @@ class FleetAdapter:
         self.max_linear_speed = max_linear_speed
         self.max_angular_speed = max_angular_speed
         self.heartbeat_timeout = heartbeat_timeout
-        self.driver_settings = settings or DriverSettings(goal_tolerance=goal_tolerance)
+        self.driver_settings = settings or DriverSettings()
         self.record = record
         self.drivers: dict[str, RobotDriver] = {}
         self.loops: dict[str, ControlLoop] = {}
@@ -219,7 +218,7 @@ class FleetAdapter:
         return cls.from_files(
             settings.robots, settings.map, cycle=settings.cycle, max_linear_speed=settings.max_linear_speed,
             max_angular_speed=settings.max_angular_speed, planning_resolution=settings.planning_resolution,
-            goal_tolerance=settings.goal_tolerance, heartbeat_timeout=settings.heartbeat_timeout, record=record,
+            heartbeat_timeout=settings.heartbeat_timeout, record=record,
             **overrides,
         )
 
