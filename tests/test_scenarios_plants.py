@@ -1,4 +1,4 @@
-"""Plants nobody tuned the fleet for: crowded stations, on the simulated clock.
+"""Plants nobody tuned the fleet for: crowded stations and team limits, on the simulated clock.
 
 The thesis scenarios seldom bring two robots to one station; these plants send four
 robots to three stations 0.9 m apart, so robots meet at the same station all the time.
@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from softplc.scenarios.runner import RunResult, run_scenario
+from softplc.config import PlantConfig
+from softplc.runtime import Adapter, Runtime
+from softplc.scenarios.runner import RunResult, fleet_adapter, run_scenario
 from softplc.scenarios.spec import Scenario, load_scenario
 
 # Four robots, three tasks whose sources (and destinations) stand 0.9 m apart in one bay;
@@ -90,3 +93,68 @@ robots:
     assert record["stuck_s"] > 300 and record["longest_stuck_s"] > 180
     assert record["utilisation"] < 0.3
     assert result.summary["goals_per_task"] == {"t01": 1}
+
+
+class TeamWatch:
+    """The scenario's fleet, plus a check after every scan cycle of how many robots serve each task."""
+
+    name = "fleet"
+
+    def __init__(self, inner: Adapter, robots: list[str], tasks: int) -> None:
+        self.inner, self.robots, self.tasks = inner, robots, tasks
+        self.largest = [0] * tasks
+        self.runtime: Runtime | None = None
+
+    async def start(self, runtime: Runtime) -> None:
+        self.runtime = runtime
+        await self.inner.start(runtime)
+        runtime.engine.after_cycle(self.count)
+
+    async def stop(self) -> None:
+        await self.inner.stop()
+
+    def describe(self) -> str:
+        return self.inner.describe()
+
+    def count(self, task: Any) -> None:
+        assert self.runtime is not None
+        value = self.runtime.db.value
+        team = [0] * self.tasks
+        for robot in self.robots:
+            number = value(f"{robot}_tcurr")
+            if value(f"{robot}_currloc") in (1, 2, 3, 4) and 1 <= number <= self.tasks:
+                team[number - 1] += 1
+        self.largest = [max(a, b) for a, b in zip(self.largest, team)]
+
+
+TEAMS = """\
+scenario: {name: teams, stop: time_limit, time_limit: 400}
+plant: {handling_time: 5, park_after: 10}
+dispatcher: {type: DISPATCHER, model: MODEL}
+tasks:
+  - {id: t01, iFr: 30, qSC: 1000, max_team_size: 1, source: {x: 3.5, y: 7.5}, destination: {x: 1.8, y: 2.5}}
+  - {id: t02, iFr: 30, qSC: 1000, max_team_size: 1, source: {x: 18.5, y: 7.5}, destination: {x: 20.1, y: 2.4}}
+robots:
+  - {id: r01, start: {x: 7.925, y: 5.925}}
+  - {id: r02, start: {x: 7.925, y: 2.925}}
+  - {id: r03, start: {x: 7.925, y: 4.525}}
+"""
+
+
+@pytest.mark.parametrize("dispatcher", ["weighting", "cooperative", "svm", "optimal"])
+def test_every_dispatcher_keeps_each_team_within_its_max_team_size(tmp_path: Path, dispatcher: str) -> None:
+    model = Path(__file__).resolve().parent.parent / "scenarios" / "svm" / "case3-sim1-model.json"
+    plant = scenario(tmp_path, TEAMS.replace("DISPATCHER", dispatcher).replace("MODEL", str(model)))
+    watches: list[TeamWatch] = []
+
+    def watched(spec: Scenario, config: PlantConfig) -> Adapter:
+        watches.append(TeamWatch(fleet_adapter(spec, config), [robot.id for robot in spec.robots], len(spec.tasks)))
+        return watches[0]
+
+    result = run_scenario(plant, adapter_factory=watched)
+    assert "faulted_programs" not in result.summary
+    assert watches[0].largest == [1, 1]  # three robots, two teams of one: neither exceeded
+    trips = [sum(record["trips"].values()) for record in result.summary["robots"].values()]
+    assert sum(trips) >= 8  # two teams of one kept busy: about 80 s per round trip, 400 s
+    if dispatcher != "optimal":  # the optimal one gives the places to the cheapest robots, whoever waited
+        assert min(trips) >= 2  # the robot left without a place gets the next one that frees

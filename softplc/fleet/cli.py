@@ -80,7 +80,8 @@ def cmd_compat(args: argparse.Namespace) -> int:
     print()
     for task in compat.tasks:
         team = compat.robots_for(task.id)
-        print(f"{task.id} ({task.name}): {', '.join(team) or 'no robot'}; team of at most {task.max_team_size}")
+        size = f"team of at most {task.max_team_size}" if task.max_team_size > 0 else "any team size"
+        print(f"{task.id} ({task.name}): {', '.join(team) or 'no robot'}; {size}")
     for robot in compat.robots:
         for task in compat.tasks:
             reasons = compat.why_not(robot.id, task.id)
