@@ -3,7 +3,8 @@
 A dispatcher binds its robots and tasks as lists; `compatible` gives, per robot (in that
 order), the numbers of the tasks (1-based, in the task order) it may serve. Instead, name the
 fleet's robots and tasks files and the ids in binding order, and the fleet's compatibility
-check (size, load capacity, speeds, hardware; thesis §4.7.2) works it out:
+check (size, load capacity, speeds, hardware; thesis §4.7.2) works it out, and the tasks'
+`max_team_size` gives the dispatcher's team limits (programs/teams.py):
 
     params:
       robots_file: robots/robots.yaml
@@ -17,6 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from softplc.fleet.compat import Compatibility
+from softplc.fleet.robots import load_tasks
 
 PROJECT = Path(__file__).resolve().parent.parent
 
@@ -33,3 +35,9 @@ def compatible_numbers(robots_file: str, tasks_file: str, robot_ids: list[str], 
     for task_id in task_ids:
         compat.task(task_id)  # an unknown id raises KeyError with the known ones
     return [sorted(numbers[task] for task in compat.tasks_for(robot) if task in numbers) for robot in robot_ids]
+
+
+def team_sizes(tasks_file: str, task_ids: list[str]) -> list[int]:
+    """Per task id (in `task_ids` order), its `max_team_size` from the tasks file."""
+    tasks = load_tasks(_find(tasks_file))  # ConfigError / KeyError say what is wrong
+    return [tasks[task_id].max_team_size for task_id in task_ids]

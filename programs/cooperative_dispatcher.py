@@ -6,12 +6,14 @@ serve. Which robot can serve which task comes from the robot and task specificat
 the fleet's compatibility check (size, load capacity, speeds, hardware — thesis Tables 6–7):
 the `compatible` parameter lists, per robot, the task numbers it may serve (the scenario runner
 fills it in from the fleet's check), or `robots_file`, `tasks_file`, `robot_ids` and `task_ids`
-name the fleet's files and the check runs at start-up (see programs/compatibility.py).
+name the fleet's files and the check runs at start-up (see programs/compatibility.py); the
+tasks file's `max_team_size` then caps each task's team too, unless `max_team` is given
+(programs/teams.py).
 """
 
 from __future__ import annotations
 
-from programs.compatibility import compatible_numbers
+from programs.compatibility import compatible_numbers, team_sizes
 from programs.task_weighting import TaskWeighting, lowest_weight
 from softplc import Param
 
@@ -27,10 +29,12 @@ class CooperativeDispatcher(TaskWeighting):
         super().setup()
         if self.robots_file:
             self.compatible = compatible_numbers(self.robots_file, self.tasks_file, self.robot_ids, self.task_ids)
+            if not self.max_team:
+                self.max_team = team_sizes(self.tasks_file, self.task_ids)
 
-    def choose(self, robot: int, weights: list[float]) -> int:
+    def choose(self, robot: int, weights: list[float], room: list[int]) -> int:
         allowed = self.compatible[robot] if robot < len(self.compatible) else []
-        open_tasks = self.open_tasks()
+        open_tasks = [task for task in self.open_tasks() if task in room]
         if len(allowed) == 1:
             return allowed[0] if allowed[0] in open_tasks else 0  # dedicated: stays on its only task
         return lowest_weight(weights, [task for task in allowed if task in open_tasks])

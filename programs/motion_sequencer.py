@@ -8,9 +8,13 @@
     3 on the way to destination  arrived → 4
     4 at the destination         the plant unloaded it (`loadstat`) → 0
 
-The sequencer only acts while the robot is available: within `reach` (0.3 m) of its goal and
-not busy. It sets `status` (busy) with every new goal; the robot itself clears `status` when
-it arrives. Task coordinates are bound as lists, task number = position + 1.
+It sets `status` (busy) with every new goal; the robot itself clears `status` when it arrives.
+A robot has arrived when it has cleared `status` within 0.5 m of its goal: one rule, shared with
+the robot's driver (softplc/fleet/arrival.py). The thesis's robMotion waited for 0.3 m while its
+robots stopped at 0.5 m; two robots sent to one station then stood still for good. A robot
+that cleared `status` farther out gave up on the trip (its navigation failed): after
+`retry_after` seconds the sequencer asks it again (status busy, same goal). Task coordinates
+are bound as lists, task number = position + 1.
 
 Beyond the thesis: with `park_after` > 0, a robot left without a task (`tnext` 0) for that
 long drives back to where it started, so it does not stand on a station other robots need
@@ -20,10 +24,9 @@ takes over at once.
 
 from __future__ import annotations
 
-import math
-
 from programs.bindings import check_lengths
 from softplc import TON, InOut, Input, Output, Param, Program
+from softplc.fleet.arrival import has_arrived, has_given_up, within_goal
 
 WAITING, TO_SOURCE, AT_SOURCE, TO_DESTINATION, AT_DESTINATION = range(5)
 
@@ -44,12 +47,13 @@ class MotionSequencer(Program):
     dest_x = Input("destination x of every task (tNN_dest_x)")
     dest_y = Input("destination y of every task (tNN_dest_y)")
     goals = InOut("goals issued per task, counted here (tNN_goals)", optional=True)
-    reach = Param(0.3, "distance to the goal at which the robot counts as there, m")
+    retry_after = Param(10.0, "seconds before a trip the robot gave up on is asked again", duration=True)
     park_after = Param(0.0, "seconds without a task before the robot drives back to its start (0: never)", duration=True)
 
     def setup(self) -> None:
         self.home: tuple[float, float] | None = None
         self.idle = TON(self.clock)
+        self.gave_up = TON(self.clock)
 
     def scan(self) -> None:
         if self.home is None:
@@ -57,12 +61,18 @@ class MotionSequencer(Program):
             self.home = (self.xpos, self.ypos)  # where the robot started: its parking place
         tasks = len(self.src_x)
         has_task = 1 <= self.tnext <= tasks
-        parking = self.currloc == WAITING and self.status and (self.xgoal, self.ygoal) == self.home
-        available = parking or (not self.status and self.at(self.xgoal, self.ygoal))
-        without_work = available and not parking and self.currloc == WAITING and not has_task
+        waiting = self.currloc == WAITING
+        parking = waiting and self.status and (self.xgoal, self.ygoal) == self.home
+        # Without a task a stopped robot is free wherever it stands; on a trip, only once it arrived.
+        available = parking or (not self.status and (waiting or has_arrived(self.xpos, self.ypos, self.xgoal, self.ygoal, self.status)))
+        without_work = available and not parking and waiting and not has_task
         park_now = self.idle(IN=without_work and self.park_after > 0, PT=self.park_after)
+        failed = not waiting and has_given_up(self.xpos, self.ypos, self.xgoal, self.ygoal, self.status)
+        if self.gave_up(IN=failed, PT=self.retry_after):
+            self.status = True  # ask again: the robot retries the same goal
+            return
         if not available:
-            return  # travelling
+            return  # travelling (or waiting to retry)
         before = self.currloc
         if self.currloc == WAITING:
             task = self.tnext
@@ -87,7 +97,7 @@ class MotionSequencer(Program):
             self.prevloc = before
 
     def at(self, x: float, y: float) -> bool:
-        return math.hypot(x - self.xpos, y - self.ypos) <= self.reach
+        return within_goal(self.xpos, self.ypos, x, y)
 
     def go(self, x: float, y: float, state: int) -> None:
         """Send the robot to (x, y): new goal, new motion state, busy."""

@@ -15,7 +15,9 @@ delivered, divided by the share of the task's output storage still to fill:
 
 Incompatible pairs (the fleet's compatibility check, parameter `compatible`) and full
 storages are masked out (`robots_file`/`tasks_file` instead of `compatible`: see
-programs/compatibility.py). Robots already on a trip keep `tnext` = 0.
+programs/compatibility.py). A task has as many slots as its team has room for (`max_team`, one
+number per task, 0 = no limit; from the tasks file's `max_team_size` with `tasks_file`; see
+programs/teams.py). Robots already on a trip keep `tnext` = 0.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from programs.bindings import check_lengths
-from programs.compatibility import compatible_numbers
+from programs.compatibility import compatible_numbers, team_sizes
+from programs.teams import NO_LIMIT, members
 from softplc import Input, Output, Param, Program
 
 IDLE = 0
@@ -59,19 +62,28 @@ class OptimalAssignment(Program):
     robot_ids = Param([], "robot ids in the order the robots are bound")
     task_ids = Param([], "task ids in the order the tasks are bound")
     speed = Param(0.2, "robot speed used to estimate driving time, m/s")
+    max_team = Param([], "most robots serving each task at once, one number per task (0 or none: no limit)")
 
     def setup(self) -> None:
         self.checked = False
         if self.robots_file:
             self.compatible = compatible_numbers(self.robots_file, self.tasks_file, self.robot_ids, self.task_ids)
+            if not self.max_team:
+                self.max_team = team_sizes(self.tasks_file, self.task_ids)
 
     def scan(self) -> None:
         if not self.checked:
             check_lengths(self, "iBM", "iFr", "qSM", "qSC", "src_x", "src_y", "dest_x", "dest_y", "cost")
             check_lengths(self, "currloc", "xpos", "ypos", "loadcap", "load", "tcurr", "tnext")
+            if len(self.max_team) > len(self.iBM):
+                raise ValueError(f"'max_team' has {len(self.max_team)} numbers for {len(self.iBM)} tasks: give one per task")
             self.checked = True
         tasks, robots = len(self.iBM), len(self.currloc)
         idle = [r for r in range(robots) if self.currloc[r] == IDLE]
+        team = members(self.tcurr, self.currloc, tasks)
+        limits = [int(limit) for limit in self.max_team] + [NO_LIMIT] * (tasks - len(self.max_team))
+        # each task once per idle robot, or as often as its team has room
+        places = [len(idle) if limits[t] <= NO_LIMIT else max(0, min(len(idle), limits[t] - team[t])) for t in range(tasks)]
         claimed = [0.0] * tasks  # items robots already heading to a source will take
         in_flight = [0.0] * tasks  # items on their way to a storage
         for r in range(robots):
@@ -83,7 +95,7 @@ class OptimalAssignment(Program):
         assigned = [0] * robots
         costs = [math.inf] * tasks
         if idle:
-            slots = [(t, k) for t in range(tasks) for k in range(len(idle))]
+            slots = [(t, k) for t in range(tasks) for k in range(places[t])]
             matrix = np.full((len(idle), len(slots)), MASKED)
             for row, r in enumerate(idle):
                 for column, (t, k) in enumerate(slots):

@@ -15,6 +15,9 @@ The thesis stopped its runs when the first output storage was full, and its form
 see a full storage (it would keep sending robots there). `skip_full: true` (not the thesis)
 leaves tasks whose output storage is full out of the choice, for runs that go on until every
 storage is full.
+
+`max_team` (one number per task, 0 = no limit, the default) caps how many robots serve a task
+at once; it needs the robots' `tcurr` and `currloc` bound to count them (programs/teams.py).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import math
 from collections.abc import Iterable, Sequence
 
 from programs.bindings import check_lengths
+from programs.teams import Teams, assign, make_teams
 from softplc import Input, Output, Param, Program
 
 
@@ -64,17 +68,24 @@ class TaskWeighting(Program):
     sPD = Input("current product demand % per task (tNN_sPD)")
     Tw = Output("task weight per task (tNN_Tw)")
     tnext = Output("task chosen for each robot's next trip (rNN_tnext)")
+    tcurr = Input("task each robot is serving (rNN_tcurr), to count teams for max_team", optional=True)
+    currloc = Input("motion state of each robot (rNN_currloc), to count teams for max_team", optional=True)
     skip_full = Param(False, "leave tasks whose output storage is full out of the choice (not the thesis)")
+    max_team = Param([], "most robots serving each task at once, one number per task (0 or none: no limit)")
 
     def setup(self) -> None:
         self.checked = False
+        self.teams: Teams | None = None
 
     def scan(self) -> None:
         if not self.checked:
-            check_lengths(self, "iFr", "iBL", "iBC", "sPPi", "qFr", "qSL", "sCDr", "sPD", "Tw")
+            tasks = check_lengths(self, "iFr", "iBL", "iBC", "sPPi", "qFr", "qSL", "sCDr", "sPD", "Tw")
+            check_lengths(self, "tnext", "tcurr", "currloc")
+            self.teams = make_teams(self, tasks)
             self.checked = True
-        self.Tw = self.weights()
-        self.tnext = [self.choose(robot, self.Tw) for robot in range(len(self.tnext))]
+        weights = self.Tw = self.weights()
+        self.tnext = assign(self.teams, self.now, len(self.tnext), self.tcurr, self.currloc,
+                            lambda robot, room: self.choose(robot, weights, room), range(1, len(weights) + 1))
 
     def open_tasks(self) -> list[int]:
         """Numbers of the tasks a robot may be sent to (all, or those with room with skip_full)."""
@@ -86,6 +97,6 @@ class TaskWeighting(Program):
             for values in zip(self.iFr, self.iBL, self.iBC, self.sPPi, self.qFr, self.qSL, self.sCDr, self.sPD)
         ]
 
-    def choose(self, robot: int, weights: list[float]) -> int:
-        """The task for robot number `robot` (0-based): here the lowest weight of all."""
-        return lowest_weight(weights, self.open_tasks())
+    def choose(self, robot: int, weights: list[float], room: list[int]) -> int:
+        """The task for robot number `robot` (0-based) among the tasks with `room` in their team: the lowest weight."""
+        return lowest_weight(weights, [task for task in self.open_tasks() if task in room])

@@ -168,3 +168,82 @@ async def test_remote_agent_logs_in_with_its_certificate_over_an_encrypted_chann
         agent.wait(10)
         await runtime.stop()
         print((agent.stdout.read() if agent.stdout else "")[-3000:])
+
+
+def start_agent(plant: Path, endpoint: str, robot: str, password: str | None = PASSWORD) -> subprocess.Popen[str]:
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    login = []
+    if password is not None:
+        env["SOFTPLC_PASSWORD"] = password
+        login = ["--user", "r01"]
+    return subprocess.Popen(
+        [sys.executable, "-m", "softplc.cli", "robot-agent", "--endpoint", endpoint, "--robot", robot,
+         "--robots", str(plant.parent / "robots.yaml"), "--map", str(MAP), *login],
+        cwd=plant.parent, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )
+
+
+async def wait_exit(process: subprocess.Popen[str], timeout: float) -> tuple[int, str]:
+    """Let the runtime keep running while the agent process ends; its exit status and output."""
+    await wait_for(lambda: process.poll() is not None, timeout, "the agent to exit")
+    return process.returncode, process.stdout.read() if process.stdout else ""
+
+
+async def test_an_agent_for_a_robot_the_runtime_drives_itself_is_refused(plant: Path, caplog: pytest.LogCaptureFixture) -> None:
+    runtime, server, fleet = await start_runtime(plant, "opc.tcp://127.0.0.1:0/softplc/")
+    agents: list[subprocess.Popen[str]] = []
+    try:
+        db = runtime.db
+        for _ in range(2):  # a second attempt is refused too, and not logged again
+            agents.append(start_agent(plant, server.endpoint, "r02"))
+            status, output = await wait_exit(agents[-1], 30)
+            assert status == 1, output
+            assert "refused robot r02: the runtime drives robot r02 itself (driver: sim in" in output
+            assert "declare it 'driver: remote' there" in output and "Traceback" not in output
+        assert fleet.refusals["r02"].refused == 2
+        lines = [r for r in caplog.records if r.name == "softplc.fleet.remote" and "refused a robot agent" in r.getMessage()]
+        assert len(lines) == 1 and lines[0].levelname == "ERROR"
+        assert db.value("r02_report") == ""  # the refused agent never drove (it would report every cycle)
+        # the runtime's own r02 still drives
+        db.submit([("r02_xgoal", 8.925), ("r02_ygoal", 2.925), ("r02_status", True)], "test")
+        await wait_for(lambda: arrived(runtime, "r02", 8.925, 2.925), 30, "r02 at (8.925, 2.925)")
+    finally:
+        for agent in agents:
+            if agent.poll() is None:
+                agent.kill()
+                agent.wait(10)
+        await runtime.stop()
+
+
+async def test_a_wrong_password_is_an_error_and_the_agent_gives_up(plant: Path) -> None:
+    runtime, server, _ = await start_runtime(plant, "opc.tcp://127.0.0.1:0/softplc/")
+    agent = start_agent(plant, server.endpoint, "r01", password="not-the-password")
+    try:
+        status, output = await wait_exit(agent, 60)
+        assert status == 1, output
+        assert output.count("ERROR: robot r01:") == 3 and "(try 3 of 3)" in output
+        assert "refused the login of user 'r01' 3 times (BadUserAccessDenied): wrong user name or password" in output
+        assert "Traceback" not in output and not runtime.db.value("r01_online")
+    finally:
+        if agent.poll() is None:
+            agent.kill()
+            agent.wait(10)
+        await runtime.stop()
+
+
+async def test_sigterm_stops_the_agent_and_says_so(plant: Path) -> None:
+    runtime, server, _ = await start_runtime(plant, "opc.tcp://127.0.0.1:0/softplc/")
+    agent = start_agent(plant, server.endpoint, "r01")
+    try:
+        db = runtime.db
+        await wait_for(lambda: db.value("r01_online"), 30, "the agent to register and report")
+        agent.send_signal(signal.SIGTERM)
+        status, output = await wait_exit(agent, 15)
+        assert status == 0, output
+        assert "robot-agent r01: SIGTERM received, stopping" in output and output.rstrip().endswith("robot-agent r01: stopped")
+        await wait_for(lambda: not db.value("r01_online"), 5, "r01 offline after the agent stopped")
+    finally:
+        if agent.poll() is None:
+            agent.kill()
+            agent.wait(10)
+        await runtime.stop()

@@ -11,11 +11,14 @@ from programs.motion_sequencer import MotionSequencer
 from programs.optimal_dispatcher import OptimalAssignment
 from programs.task_weighting import TaskWeighting, lowest_weight, task_weight
 from softplc.clock import SimClock
+from softplc.fleet.arrival import GOAL_TOLERANCE
 from softplc.program import Program, ProgramContext
 
 
 def make(cls: type[Program], **params: object) -> Program:
     program = cls(ProgramContext("test", SimClock(), dict(params)))
+    for name in cls.variables:
+        setattr(program, name, None)  # as the runtime leaves a variable nobody bound
     program.setup()
     return program
 
@@ -151,17 +154,49 @@ def test_sequencer_walks_a_full_trip():
     assert (program.currloc, program.tcurr, program.goals) == (1, 1, [1, 1])
 
 
-def test_sequencer_waits_until_the_robot_is_within_reach():
+def test_sequencer_takes_the_robot_by_the_fleets_arrival_rule():
+    # The driver clears status within GOAL_TOLERANCE; the sequencer must take the robot there too
+    # (with the thesis's 0.3 m, a robot stopped 0.45 m out by another robot on the station stood still for good).
+    assert GOAL_TOLERANCE == 0.5
     program = sequencer()
     program.tnext = 1
     program.scan()
-    program.status = False  # status cleared 0.5 m out, but the robot is still 0.4 m away
-    program.xpos, program.ypos = 3.5, 7.1
+    program.xpos, program.ypos = 3.5, 7.1  # 0.4 m short, still busy: travelling
     program.scan()
     assert program.currloc == 1
-    program.ypos = 7.25  # 0.25 m: within the thesis's 0.3 m
+    program.status = False  # the robot cleared status 0.45 m out (a robot on the station kept it there)
+    program.ypos = 7.05
     program.scan()
     assert program.currloc == 2
+
+
+def test_sequencer_asks_again_when_the_robot_gave_up():
+    program = sequencer()
+    program.retry_after = 10.0
+    program.tnext = 1
+    program.scan()
+    assert (program.currloc, program.status) == (1, True)
+    program.status = False  # the driver gave up (navstate failed) 2 m short of the source
+    program.xpos, program.ypos = 3.5, 5.5
+    program.clock._now = 100.0  # noqa: SLF001 (the simulated clock is stepped by hand here)
+    program.scan()
+    program.clock._now = 109.0  # noqa: SLF001
+    program.scan()
+    assert (program.currloc, program.status) == (1, False)  # neither arrived nor asked again yet
+    program.clock._now = 110.0  # noqa: SLF001
+    program.scan()
+    assert (program.currloc, program.status, program.xgoal, program.ygoal) == (1, True, 3.5, 7.5)  # same goal, busy again
+    assert program.goals == [1, 0]  # a retry is not a new goal
+
+
+def test_sequencer_gives_a_robot_whose_parking_failed_a_task():
+    program = sequencer(x=7.9, y=4.5)
+    program.scan()  # home is (7.9, 4.5)
+    program.xgoal, program.ygoal = 7.9, 4.5
+    program.xpos, program.ypos, program.status = 3.0, 3.0, False  # its drive home failed far from home
+    program.tnext = 2
+    program.scan()
+    assert (program.currloc, program.tcurr, program.status) == (1, 2, True)
 
 
 @pytest.mark.parametrize("tnext", [0, 3, 99])
@@ -303,3 +338,86 @@ def test_an_unknown_id_in_the_compatibility_files_is_named():
     with pytest.raises(KeyError, match="r09"):
         make(CooperativeDispatcher, robots_file="robots/robots.yaml", tasks_file="robots/tasks.yaml",
              robot_ids=["r09"], task_ids=["t01"])
+
+
+# -- team sizes (max_team_size, programs/teams.py) -----------------------------------------------
+
+
+def _robots_on(program: Program, tcurr: list[int], currloc: list[int]) -> None:
+    program.tcurr, program.currloc = tcurr, currloc
+
+
+def test_weighting_keeps_a_task_within_its_team_size():
+    program = make(TaskWeighting, max_team=[0, 1])  # task 2 admits one robot at a time, task 1 any number
+    _weighting_inputs(program, iBL=[20.0, 60.0], qSL=[10.0, 10.0], robots=3)
+    _robots_on(program, [0, 0, 0], [0, 0, 0])
+    program.scan()
+    assert program.tnext == [2, 1, 1]  # task 2 weighs least, but only the first robot may go
+    _robots_on(program, [0, 2, 0], [0, 3, 0])  # r02 is on task 2 (carrying to its destination)
+    program.scan()
+    assert program.tnext == [1, 2, 1]  # the idle robots may not join it; r02 may stay on it next trip
+
+
+def test_a_robot_waiting_for_a_place_gets_the_next_one_that_frees():
+    program = make(TaskWeighting, max_team=[1, 1])
+    _weighting_inputs(program, iBL=[20.0, 60.0], qSL=[10.0, 10.0], robots=3)  # task 2 weighs least
+    _robots_on(program, [1, 2, 0], [3, 1, 0])  # r01 on task 1, r02 on task 2, r03 idle: both teams full
+    program.scan()
+    # r03 waits for task 2; r02 is not promised task 2 again, or it would keep the place for ever
+    assert program.tnext == [1, 0, 0]
+    program.clock._now = 60.0  # noqa: SLF001
+    _robots_on(program, [1, 2, 0], [3, 0, 0])  # r02 has unloaded: both r02 and r03 are idle
+    program.scan()
+    assert program.tnext == [1, 0, 2]  # r03 has waited longer
+
+
+def test_cooperative_dispatcher_keeps_teams_within_their_size():
+    program = make(CooperativeDispatcher, compatible=[[2], [1, 2], [1, 2]], max_team=[2, 2])
+    _weighting_inputs(program, iBL=[20.0, 60.0], qSL=[10.0, 10.0], robots=3)
+    _robots_on(program, [2, 0, 0], [1, 0, 0])
+    program.scan()
+    assert program.tnext == [2, 2, 1]  # r01 (dedicated) and one more on task 2; the third goes to task 1
+
+
+def test_svm_dispatcher_keeps_teams_within_their_size(tmp_path):
+    from programs.svm_dispatcher import SvmDispatcher
+    from softplc.svm.dataset import feature_names
+    from softplc.svm.model import TaskModel
+
+    TaskModel(features=feature_names(2), classes=[0, 1], coef=[[0.0] * 6], intercept=[-1.0]).save(tmp_path / "m.json")  # always task 1
+    program = make(SvmDispatcher, model=str(tmp_path / "m.json"), max_team=[1, 0])
+    program.iBL, program.qSL, program.sPD, program.tnext = [50.0, 50.0], [20.0, 20.0], [0.0, 0.0], [0, 0]
+    _robots_on(program, [0, 0], [0, 0])
+    program.scan()
+    assert program.tnext == [1, 2]  # the second robot gets the model's other choice
+
+
+def test_optimal_dispatcher_gives_a_task_no_more_places_than_its_team_has():
+    program = optimal([(4.0, 7.0), (4.2, 7.0)], [[1, 2], [1, 2]])
+    program.scan()
+    assert program.tnext == [1, 1]  # no limit: both to the task beside them
+    program = optimal([(4.0, 7.0), (4.2, 7.0)], [[1, 2], [1, 2]])
+    program.max_team = [1, 0]
+    program.scan()
+    assert sorted(program.tnext) == [1, 2]
+    program = optimal([(4.0, 7.0), (4.2, 7.0), (4.4, 7.0)], [[1, 2], [1, 2], [1]])
+    program.max_team = [1, 1]
+    program.tcurr, program.currloc = [1, 0, 0], [2, 0, 0]  # the first robot is loading at task 1
+    program.scan()
+    assert program.tnext == [0, 2, 0]  # task 1's one place is taken: the robot that serves only task 1 waits
+
+
+def test_a_team_limit_without_the_robots_states_is_a_clear_fault():
+    program = make(TaskWeighting, max_team=[1, 1])
+    _weighting_inputs(program, iBL=[20.0, 60.0], qSL=[10.0, 10.0])
+    with pytest.raises(ValueError, match="'max_team' needs 'tcurr' and 'currloc' bound"):
+        program.scan()
+
+
+def test_team_sizes_come_from_the_tasks_file():
+    program = make(CooperativeDispatcher, robots_file="robots/robots.yaml", tasks_file="robots/tasks.yaml",
+                   robot_ids=["r01", "r02", "r03"], task_ids=["t01", "t02"])
+    assert program.max_team == [2, 2]
+    program = make(OptimalAssignment, robots_file="robots/robots.yaml", tasks_file="robots/tasks.yaml",
+                   robot_ids=["r01", "r02", "r03"], task_ids=["t02", "t01"])
+    assert program.max_team == [2, 2]

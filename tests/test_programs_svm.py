@@ -264,6 +264,7 @@ def test_svm_dispatcher_with_skip_full_never_picks_a_full_storage(tmp_path):
     program = SvmDispatcher(ProgramContext("svm", SimClock(), {"model": str(tmp_path / "m.json"), "skip_full": True}))
     program.setup()
     program.iBL, program.sPD, program.tnext, program.svm_out = [50.0, 50.0], [0.0, 0.0], [0], 0
+    program.tcurr = program.currloc = None  # unbound, as the runtime leaves them
     for levels, task in (([20.0, 20.0], 1), ([100.0, 20.0], 2), ([100.0, 100.0], 0)):
         program.qSL = levels
         program.scan()

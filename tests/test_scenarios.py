@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -50,6 +51,15 @@ def test_thesis_scenarios_end_with_a_full_output_storage_and_no_faults(name):
 def test_case1_sim1_faster_input_gets_more_goals():
     goals = full_run("case1-sim1").summary["goals_per_task"]  # thesis: 6 vs 3
     assert goals["t01"] > goals["t02"] >= 1
+
+
+def test_case1_without_consumer_demand_is_what_the_docs_say():
+    # docs/case-studies.md: with sCDr 0 for task 2 too, sim 2 runs the same, sim 1 gives task 2 one goal fewer.
+    for name, goals in (("case1-sim1", {"t01": 6, "t02": 2}), ("case1-sim2", full_run("case1-sim2").summary["goals_per_task"])):
+        scenario = load_scenario(find_scenario(name))
+        assert scenario.tasks[1].sCDr == 5
+        no_demand = replace(scenario, tasks=[replace(task, sCDr=0.0) for task in scenario.tasks])
+        assert run_scenario(no_demand).summary["goals_per_task"] == goals
 
 
 def test_case1_sim2_higher_profit_index_gets_more_goals():

@@ -2,7 +2,8 @@
 
 Simulated robots (`driver: sim`) each get a control loop in the runtime; remote robots
 (`driver: remote`) run the same driver in a `softplc robot-agent` process, and this adapter
-publishes their reports to their tags and marks those tags BAD while the agent is away.
+publishes their reports to their tags and marks those tags BAD while the agent is away
+(`softplc.fleet.remote`). An agent that registers for a simulated robot is refused.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from softplc.fleet.loop import ControlLoop, LoopStats, Sample
 from softplc.fleet.peers import PEER_TAGS, PeerView
 from softplc.fleet.planner import PathPlanner
 from softplc.fleet.planning import ClockPlanning, Planning, ProcessPlanning
-from softplc.fleet.protocol import Registration, decode_report
+from softplc.fleet.remote import PUBLISHED_TAGS, AgentRefusal, RemoteLink
 from softplc.fleet.robots import DriverKind, Pose, RobotFile, RobotSpec, load_robots
 from softplc.fleet.settings import FleetSettings
 from softplc.tagdb import Origin, TagDatabase
@@ -36,7 +37,6 @@ log = logging.getLogger(__name__)
 
 # Tags every robot needs (NAME → rNN_NAME); remote robots need REMOTE_TAGS too.
 COMMAND_TAGS = ("xgoal", "ygoal", "status")
-PUBLISHED_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "navreason", "route")
 REMOTE_TAGS = ("report", "agent", "online")
 REQUIRED_TAGS = tuple(dict.fromkeys((*COMMAND_TAGS, *PUBLISHED_TAGS, *PEER_TAGS)))
 PHASES = 10  # robots' cycles are spread over this many slots of the cycle (smoother load)
@@ -99,81 +99,6 @@ class TagIO:
                     log.warning("robot %s: %s", self.id, rejected)
 
 
-class RemoteLink:
-    """The runtime's side of a remote robot: reports in, heartbeat watch, quality BAD when away."""
-
-    def __init__(self, db: TagDatabase, spec: RobotSpec, now: Any, timeout: float) -> None:
-        self.db = db
-        self.spec = spec
-        self.id = spec.id
-        self._now = now
-        self.timeout = timeout
-        self.online = False
-        self.last_seen = -1.0
-        self.registration: Registration | None = None
-        self.reports = 0
-        self.rejected = 0
-        self._status_seq: int | None = None
-        self._published = [f"{spec.id}_{name}" for name in PUBLISHED_TAGS]
-        self.source = Origin(f"fleet:{spec.id}:remote", role=None)
-
-    def go_offline(self, why: str) -> None:
-        if self.online:
-            log.warning("remote robot %s is away (%s): its tags are BAD until it reports again", self.id, why)
-        self.online = False
-        self.db.submit_quality(self._published, Quality.BAD, self.source)
-        self.db.submit([(f"{self.id}_online", False)], self.source)
-
-    def on_agent(self, text: str) -> None:
-        if not text:
-            return
-        try:
-            registration = Registration.decode(text)
-        except ValueError as error:
-            log.warning("robot %s: ignoring a bad registration: %s", self.id, error)
-            return
-        if registration.id != self.id:
-            log.warning("robot %s: an agent registered as %r in its tag; ignored", self.id, registration.id)
-            return
-        self.registration = registration
-        self._status_seq = None  # a new agent session numbers its status events afresh
-        expected = sorted(item.value for item in self.spec.hardware)
-        if registration.hardware and sorted(registration.hardware) != expected:
-            log.warning("robot %s registered with hardware %s, robots.yaml says %s", self.id, registration.hardware, expected)
-        log.info("robot %s (%s) registered from %s (pid %s, %s)", self.id, registration.name, registration.host or "?", registration.pid, registration.software)
-
-    def on_report(self, text: str) -> None:
-        if not text:
-            return
-        try:
-            report = decode_report(text)
-        except ValueError as error:
-            self.rejected += 1
-            log.warning("robot %s: ignoring a bad report: %s", self.id, error)
-            return
-        self.reports += 1
-        self.last_seen = self._now()
-        items: list[tuple[str, Any]] = [
-            (f"{self.id}_xpos", report.x), (f"{self.id}_ypos", report.y), (f"{self.id}_heading", report.heading),
-            (f"{self.id}_speed", report.speed), (f"{self.id}_navstate", report.navstate), (f"{self.id}_navreason", report.reason),
-            (f"{self.id}_route", report.route),
-        ]
-        if not self.online:
-            self.online = True
-            items.append((f"{self.id}_online", True))
-            log.info("remote robot %s is online", self.id)
-        if report.status is not None and report.status_seq != self._status_seq:
-            self._status_seq = report.status_seq
-            items.append((f"{self.id}_status", report.status))
-        for rejected in self.db.submit(items, self.source):
-            if rejected is not None:
-                log.warning("robot %s: %s", self.id, rejected)
-
-    def check(self) -> None:
-        if self.online and self._now() - self.last_seen > self.timeout:
-            self.go_offline(f"no report for {self.timeout:g} s")
-
-
 class FleetAdapter:
     """Drives every robot of a robots file on a map; see the `softplc.fleet` docstring."""
 
@@ -188,7 +113,6 @@ class FleetAdapter:
         max_linear_speed: float = 0.2,
         max_angular_speed: float = 0.4,
         planning_resolution: float = 0.1,
-        goal_tolerance: float = 0.5,
         heartbeat_timeout: float = 3.0,
         record: bool = False,
         settings: DriverSettings | None = None,
@@ -199,7 +123,7 @@ class FleetAdapter:
         self.max_linear_speed = max_linear_speed
         self.max_angular_speed = max_angular_speed
         self.heartbeat_timeout = heartbeat_timeout
-        self.driver_settings = settings or DriverSettings(goal_tolerance=goal_tolerance)
+        self.driver_settings = settings or DriverSettings()
         self.record = record
         self.drivers: dict[str, RobotDriver] = {}
         self.loops: dict[str, ControlLoop] = {}
@@ -209,7 +133,8 @@ class FleetAdapter:
         self._tasks: list[asyncio.Task[Any]] = []
         self._unsubscribe: Any = None
         self._cleanup: list[Any] = []
-        self._watch: dict[str, tuple[RemoteLink, str]] = {}
+        self.refusals: dict[str, AgentRefusal] = {}
+        self._watch: dict[str, tuple[RemoteLink | AgentRefusal, str]] = {}
         self._planning: ProcessPlanning | None = None
 
     @classmethod
@@ -219,7 +144,7 @@ class FleetAdapter:
         return cls.from_files(
             settings.robots, settings.map, cycle=settings.cycle, max_linear_speed=settings.max_linear_speed,
             max_angular_speed=settings.max_angular_speed, planning_resolution=settings.planning_resolution,
-            goal_tolerance=settings.goal_tolerance, heartbeat_timeout=settings.heartbeat_timeout, record=record,
+            heartbeat_timeout=settings.heartbeat_timeout, record=record,
             **overrides,
         )
 
@@ -276,8 +201,13 @@ class FleetAdapter:
                 self.remotes[robot.id] = link
                 self._watch[f"{robot.id}_report"] = (link, "report")
                 self._watch[f"{robot.id}_agent"] = (link, "agent")
-        if self.remotes:
+            elif f"{robot.id}_agent" in db:  # an agent may try to register for it: refuse it
+                refusal = AgentRefusal(db, robot, self.robots.path, runtime.clock.now)
+                self.refusals[robot.id] = refusal
+                self._watch[f"{robot.id}_agent"] = (refusal, "agent")
+        if self._watch:
             self._unsubscribe = db.on_change(self._on_change)
+        if self.remotes:
             self._tasks.append(runtime.spawn(self._heartbeats(), "fleet-heartbeats"))
         # The maps, planners and robots live as long as the runtime: keep them out of the
         # garbage collector's full passes (a full pass over them stalled the loop for >100 ms).
@@ -341,9 +271,9 @@ class FleetAdapter:
             if entry is None:
                 continue
             link, kind = entry
-            if kind == "report":
+            if kind == "report" and isinstance(link, RemoteLink):
                 link.on_report(str(tag.value))
-            else:
+            elif kind == "agent":
                 link.on_agent(str(tag.value))
 
     async def _heartbeats(self) -> None:

@@ -3,11 +3,16 @@
     softplc robot-agent --endpoint opc.tcp://plc:4840/softplc/ --robot r01 --user r01 --password-file r01.pw
 
 The agent loads its robot's configuration (robots.yaml) and the map, connects, registers itself
-by writing `rNN_agent` (id, name, hardware, host: nobody types its address anywhere), subscribes
-to its goal tags and to every robot's traffic tags, and every cycle writes its pose and state as
-one `rNN_report`, which the runtime's fleet adapter publishes to the robot's read-only tags.
-When the runtime goes away the robot stops where it is, and the agent reconnects with
-exponential backoff; its driver (pose, path) survives the reconnection.
+by writing `rNN_agent` (id, name, hardware, host: nobody types its address anywhere), waits for
+the runtime's answer in that tag, subscribes to its goal tags and to every robot's traffic tags,
+and every cycle writes its pose and state as one `rNN_report`, which the runtime's fleet adapter
+publishes to the robot's read-only tags. When the runtime goes away the robot stops where it
+is, and the agent reconnects with exponential backoff; its driver (pose, path) survives the
+reconnection.
+
+Some failures are not worth retrying and end `run()` with an `AgentError`: the runtime refused
+the registration (it drives that robot itself, or has no such robot), or refused the login
+`max_login_failures` times in a row (each refusal is logged as an error).
 """
 
 from __future__ import annotations
@@ -30,12 +35,35 @@ from softplc.fleet.driver import Command, DriverSettings, Report, RobotDriver
 from softplc.fleet.floor import Floor
 from softplc.fleet.loop import ControlLoop
 from softplc.fleet.peers import PEER_TAGS, PeerView
-from softplc.fleet.protocol import Registration, encode_report
+from softplc.fleet.protocol import Answer, Registration, encode_report
 from softplc.fleet.robots import RobotFile, unknown_id_message
 
 log = logging.getLogger(__name__)
 
 DEFAULT_NAMESPACE = "urn:softplc:tags"
+ANSWER_TIMEOUT = 10.0  # s the runtime has to answer a registration (it answers within a scan cycle)
+# What a server answers when it will not have this client: wrong password, an identity or
+# certificate it does not accept, or a user who may not write.
+LOGIN_REFUSALS = frozenset({
+    ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadIdentityTokenInvalid, ua.StatusCodes.BadIdentityTokenRejected,
+    ua.StatusCodes.BadCertificateUntrusted, ua.StatusCodes.BadCertificateInvalid, ua.StatusCodes.BadCertificateTimeInvalid,
+    ua.StatusCodes.BadCertificateUriInvalid, ua.StatusCodes.BadSecurityChecksFailed,
+})
+
+
+class AgentError(Exception):
+    """The agent cannot go on (not worth retrying): the message says why and what to do."""
+
+
+class Unanswered(Exception):
+    """The runtime did not answer the registration in time (retried like a lost connection)."""
+
+
+def login_refusal(error: BaseException) -> str:
+    """The status name when `error` is the server refusing this client's login; '' otherwise."""
+    if isinstance(error, ua.UaStatusCodeError) and error.code in LOGIN_REFUSALS:
+        return ua.StatusCode(error.code).name
+    return ""
 
 
 @dataclass
@@ -52,18 +80,27 @@ class Credentials:
 class SubscriptionIO:
     """The driver's inputs from OPC UA subscriptions, its output as one report write per cycle."""
 
-    def __init__(self, client: Client, namespace: int, robot_id: str, ids: list[str], first_event: int) -> None:
+    def __init__(self, client: Client, namespace: int, robot_id: str, ids: list[str], first_event: int, session: str = "") -> None:
         self.client = client
         self.id = robot_id
         self.ids = ids
         self.values: dict[str, Any] = {}
+        self.session = session  # of our registration: the runtime's answer names it
+        self.answer: Answer | None = None
+        self.answered = asyncio.Event()
         self._report = client.get_node(ua.NodeId(f"{robot_id}_report", namespace))
         self._seq = 0
         self._first_event = first_event  # status events before this session are not re-sent
         self._status: tuple[int, bool] | None = None
 
     def datachange_notification(self, node: Any, value: Any, data: Any) -> None:
-        self.values[node.nodeid.Identifier] = value
+        name = node.nodeid.Identifier
+        self.values[name] = value
+        if name == f"{self.id}_agent" and isinstance(value, str):
+            answer = Answer.decode(value)
+            if answer is not None and answer.session == self.session:
+                self.answer = answer
+                self.answered.set()
 
     def status_change_notification(self, status: Any) -> None:
         pass  # the session's end is noticed by the next write or the connection watchdog
@@ -104,6 +141,7 @@ class RobotAgent:
         limits: SpeedLimits | None = None,
         clock: Clock | None = None,
         max_backoff: float = 5.0,
+        max_login_failures: int = 3,
     ) -> None:
         try:
             self.spec = robots[robot_id]
@@ -116,26 +154,42 @@ class RobotAgent:
         self.cycle = cycle
         self.clock = clock or RealClock()
         self.max_backoff = max_backoff
+        self.max_login_failures = max_login_failures
         speed = limits or SpeedLimits(self.spec.max_linear_speed, self.spec.max_angular_speed)
         self.driver = RobotDriver(self.spec, floor, speed, DriverSettings(), cycle=cycle)
         self.connections = 0
         self.connected = asyncio.Event()
 
     async def run(self) -> None:
-        """Connect and drive forever, reconnecting with exponential backoff."""
+        """Connect and drive until cancelled, reconnecting with exponential backoff; AgentError when that is futile."""
         backoff = 0.5
+        login_failures = 0
+        robot_id = self.spec.id
         while True:
             try:
                 await self._session()
                 backoff = 0.5
-            except asyncio.CancelledError:
+            except (asyncio.CancelledError, AgentError):
                 raise
             except Exception as error:  # any network or server failure: retry later
-                if self.connected.is_set():
-                    log.warning("robot %s: lost the runtime at %s (%s); reconnecting", self.spec.id, self.endpoint, _describe(error))
+                refusal = login_refusal(error)
+                if refusal:
+                    login_failures += 1
+                    who = f"user {self.credentials.user!r}" if self.credentials.user else "this client"
+                    log.error("robot %s: %s refused the login of %s (%s): %s (try %d of %d)", robot_id, self.endpoint, who,
+                              refusal, _login_hint(refusal, self.credentials), login_failures, self.max_login_failures)
+                    if login_failures >= self.max_login_failures:
+                        raise AgentError(f"{self.endpoint} refused the login of {who} {login_failures} times ({refusal}): "
+                                         f"{_login_hint(refusal, self.credentials)}") from None
+                elif isinstance(error, Unanswered):
+                    log.warning("robot %s: %s at %s; trying again", robot_id, error, self.endpoint)
+                elif self.connected.is_set():
+                    log.warning("robot %s: lost the runtime at %s (%s); reconnecting", robot_id, self.endpoint, _describe(error))
                     backoff = 0.5
                 else:
-                    log.info("robot %s: cannot connect to %s (%s); retrying in %.1f s", self.spec.id, self.endpoint, _describe(error), backoff)
+                    log.info("robot %s: cannot connect to %s (%s); retrying in %.1f s", robot_id, self.endpoint, _describe(error), backoff)
+            if self.connected.is_set():
+                login_failures = 0  # it was in: a refusal later is news, not a repeat
             self.connected.clear()
             await asyncio.sleep(backoff)  # network plumbing: real time, whatever the robot's clock
             backoff = min(self.max_backoff, backoff * 2)
@@ -145,20 +199,16 @@ class RobotAgent:
         async with client:
             namespace = await client.get_namespace_index(self.namespace)
             robot_id = self.spec.id
-            io = SubscriptionIO(client, namespace, robot_id, self.robots.ids, self.driver.status_seq + 1)
-            names = [f"{robot_id}_{tag}" for tag in ("xgoal", "ygoal", "status")]
+            session = uuid.uuid4().hex[:12]
+            io = SubscriptionIO(client, namespace, robot_id, self.robots.ids, self.driver.status_seq + 1, session)
+            names = [f"{robot_id}_{tag}" for tag in ("xgoal", "ygoal", "status", "agent")]
             names += [f"{other}_{tag}" for other in self.robots.ids for tag in PEER_TAGS]
             subscription = await client.create_subscription(50, io)
             await subscription.subscribe_data_change([client.get_node(ua.NodeId(name, namespace)) for name in names], queuesize=1)
-            registration = Registration(
-                id=robot_id, name=self.spec.name, hardware=sorted(item.value for item in self.spec.hardware),
-                host=socket.gethostname(), pid=os.getpid(), software=f"softplc {__version__}", session=uuid.uuid4().hex[:12],
-            )
-            await client.get_node(ua.NodeId(f"{robot_id}_agent", namespace)).write_value(
-                ua.DataValue(ua.Variant(registration.encode(), ua.VariantType.String)))
+            await self._register(client, namespace, io)
             self.connections += 1
             self.connected.set()
-            log.info("robot %s: connected to %s and registered", robot_id, self.endpoint)
+            log.info("robot %s: connected to %s, registered and accepted", robot_id, self.endpoint)
             loop = ControlLoop(self.driver, io, self.clock, self.cycle)
             watchdog = asyncio.ensure_future(self._watch(client))
             driving = asyncio.ensure_future(loop.run())
@@ -170,6 +220,33 @@ class RobotAgent:
                 for task in (watchdog, driving):
                     task.cancel()
                 self.driver.v = self.driver.w = 0.0  # disconnected: the robot stands still
+
+    async def _register(self, client: Client, namespace: int, io: SubscriptionIO) -> None:
+        """Write the registration and wait for the runtime's answer; AgentError if it refuses."""
+        robot_id = self.spec.id
+        registration = Registration(
+            id=robot_id, name=self.spec.name, hardware=sorted(item.value for item in self.spec.hardware),
+            host=socket.gethostname(), pid=os.getpid(), software=f"softplc {__version__}", session=io.session,
+        )
+        try:
+            await client.get_node(ua.NodeId(f"{robot_id}_agent", namespace)).write_value(
+                ua.DataValue(ua.Variant(registration.encode(), ua.VariantType.String)))
+        except ua.UaStatusCodeError as error:
+            if error.code in (ua.StatusCodes.BadNodeIdUnknown, ua.StatusCodes.BadNodeIdInvalid):
+                raise AgentError(f"the runtime at {self.endpoint} has no tag {robot_id}_agent: robot {robot_id} is not in its "
+                                 "robots.yaml, or its robot template lacks the remote-robot tags (docs/robots.md)") from None
+            if error.code == ua.StatusCodes.BadUserAccessDenied:
+                who = f"user {self.credentials.user!r}" if self.credentials.user else "an anonymous session"
+                raise AgentError(f"{who} may not write {robot_id}_agent at {self.endpoint}: a robot agent logs in as a user "
+                                 f"with the operator role (softplc users add {robot_id} --role operator)") from None
+            raise
+        try:
+            await asyncio.wait_for(io.answered.wait(), ANSWER_TIMEOUT)
+        except asyncio.TimeoutError:
+            raise Unanswered(f"no answer to the registration within {ANSWER_TIMEOUT:g} s") from None
+        assert io.answer is not None
+        if not io.answer.accepted:
+            raise AgentError(f"the runtime at {self.endpoint} refused robot {robot_id}: {io.answer.reason}")
 
     async def _watch(self, client: Client) -> None:
         """End the session when the connection dies even if no write notices it."""
@@ -217,6 +294,16 @@ def _application_uri(path: Path) -> str:
         return ""
     uris = names.get_values_for_type(x509.UniformResourceIdentifier)
     return uris[0] if uris else ""
+
+
+def _login_hint(status: str, credentials: Credentials) -> str:
+    if status == "BadUserAccessDenied":
+        if credentials.user:
+            return "wrong user name or password (or too many failed logins from this computer: wait a minute)"
+        return "the runtime does not let this certificate log in: add its user (softplc users add NAME --certificate ...)"
+    if status.startswith("BadCertificate") or status == "BadSecurityChecksFailed":
+        return "the runtime does not trust this certificate (softplc opcua trust FINGERPRINT on its machine)"
+    return "the runtime does not accept this identity (anonymous sessions may be off: give --user)"
 
 
 def _describe(error: BaseException) -> str:

@@ -11,6 +11,7 @@ import asyncio
 import json
 import logging
 import os
+import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -80,7 +81,8 @@ def cmd_compat(args: argparse.Namespace) -> int:
     print()
     for task in compat.tasks:
         team = compat.robots_for(task.id)
-        print(f"{task.id} ({task.name}): {', '.join(team) or 'no robot'}; team of at most {task.max_team_size}")
+        size = f"team of at most {task.max_team_size}" if task.max_team_size > 0 else "any team size"
+        print(f"{task.id} ({task.name}): {', '.join(team) or 'no robot'}; {size}")
     for robot in compat.robots:
         for task in compat.tasks:
             reasons = compat.why_not(robot.id, task.id)
@@ -145,7 +147,7 @@ def add_agent_command(subparsers: Any) -> None:
 
 
 def cmd_robot_agent(args: argparse.Namespace) -> int:
-    from softplc.fleet.agent import Credentials, RobotAgent
+    from softplc.fleet.agent import AgentError, Credentials, RobotAgent
     from softplc.fleet.controller import SpeedLimits
     from softplc.fleet.floor import Floor
     from softplc.fleet.gridmap import load_map
@@ -183,9 +185,38 @@ def cmd_robot_agent(args: argparse.Namespace) -> int:
     if getattr(args, "verbose", 0) < 2:
         # asyncua logs a traceback for every lost connection; the agent says it in one line.
         logging.getLogger("asyncua").setLevel(logging.CRITICAL)
-    print(f"robot-agent {args.robot} ({spec.name}): connecting to {args.endpoint}; Ctrl-C to stop", file=sys.stderr)
+    name = f"robot-agent {args.robot}"
+    print(f"{name} ({spec.name}): connecting to {args.endpoint}; Ctrl-C to stop", file=sys.stderr)
     try:
-        asyncio.run(agent.run())
-    except KeyboardInterrupt:
-        return 130
-    return 0
+        stopped_by = asyncio.run(_drive_until_signal(agent, name))
+    except AgentError as error:
+        print(f"softplc {name}: {error}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:  # a Ctrl-C before the loop's handler was in place
+        stopped_by = signal.SIGINT
+    print(f"{name}: stopped", file=sys.stderr)
+    return 130 if stopped_by == signal.SIGINT else EXIT_OK
+
+
+async def _drive_until_signal(agent: Any, name: str) -> int:
+    """Run the agent until SIGTERM or SIGINT (announced, the session closed); the signal's number."""
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    assert task is not None
+    received: list[int] = []
+
+    def stop(signum: int) -> None:
+        if not received:
+            print(f"{name}: {signal.Signals(signum).name} received, stopping (the robot stands still, the session closes)",
+                  file=sys.stderr)
+            task.cancel()
+        received.append(signum)
+
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(signum, stop, signum)
+    try:
+        await agent.run()
+    except asyncio.CancelledError:
+        if not received:
+            raise
+    return received[0] if received else 0

@@ -19,6 +19,7 @@ import enum
 import math
 from dataclasses import dataclass, field
 
+from softplc.fleet.arrival import within_goal
 from softplc.fleet.controller import PurePursuit, SpeedLimits, integrate
 from softplc.fleet.floor import Floor
 from softplc.fleet.peers import Peer, PeerView, encode_route
@@ -42,8 +43,8 @@ class NavState(enum.Enum):
 class DriverSettings:
     """Tuning of the local navigation (defaults suit the thesis TurtleBots at 0.2 m/s)."""
 
-    goal_tolerance: float = 0.5  # goal reached: status cleared (thesis Eq. 4.1)
-    stop_tolerance: float = 0.1  # then keeps creeping to within this of the goal
+    # Arrival (status cleared) is softplc.fleet.arrival's rule, shared with the sequencers: not a setting.
+    stop_tolerance: float = 0.1  # after arriving, keeps creeping to within this of the goal
     yield_wait: float = 1.0  # s stopped before making way for a robot with right of way
     patience: float = 6.0  # s stopped before detouring around a robot we have right of way over
     replan_interval: float = 2.0  # s between detour attempts while blocked
@@ -206,7 +207,7 @@ class RobotDriver:
             status = self._status  # our own write has not reached the tags yet
         if self.goal is None:
             self.goal = goal
-            if self._distance(goal) > self.settings.goal_tolerance:
+            if not self._within(goal):
                 self._start(now, goal, peers)
             return
         if math.dist(goal, self.goal) > 1e-6:
@@ -223,7 +224,7 @@ class RobotDriver:
         self._blocker = None
         self._make_way = False
         self._pending = None
-        if self._distance(goal) <= self.settings.goal_tolerance:
+        if self._within(goal):
             self._arrive(now)
             return
         self._set_status(now, True)
@@ -269,8 +270,11 @@ class RobotDriver:
         self._status_event = value
         self.status_seq += 1
 
-    def _distance(self, point: tuple[float, float]) -> float:
-        return math.hypot(point[0] - self.pose.x, point[1] - self.pose.y)
+    def _occupies_goal(self, peer: Peer) -> bool:
+        return self.goal is not None and within_goal(peer.x, peer.y, self.goal[0], self.goal[1])
+
+    def _within(self, goal: tuple[float, float]) -> bool:
+        return within_goal(self.pose.x, self.pose.y, goal[0], goal[1])
 
     # -- following -----------------------------------------------------------------------
 
@@ -278,7 +282,7 @@ class RobotDriver:
         assert self.path is not None and self.goal is not None
         settings = self.settings
         pose = self.pose
-        if not self._arrived and self._distance(self.goal) <= settings.goal_tolerance:
+        if not self._arrived and self._within(self.goal):
             self._arrive(now)
         end = self.path[-1]
         if math.hypot(end[0] - pose.x, end[1] - pose.y) <= settings.stop_tolerance:
@@ -306,6 +310,9 @@ class RobotDriver:
                 return 0.0, 0.0
             if verdict.yielding:
                 self._blocked(now, f"yielding to {blocker.id}", settings.yield_wait, peers, True)
+            elif not blocker.active and self._occupies_goal(blocker):
+                # Its station is taken: wait here until the robot there leaves (or give up).
+                self._blocked(now, f"waiting for the station, {blocker.id} is there", settings.yield_wait, peers, False)
             elif not blocker.active:
                 self._blocked(now, f"blocked by {blocker.id}", settings.yield_wait, peers, False)
             else:

@@ -1,8 +1,10 @@
 """How a remote robot agent and the runtime talk, through two string tags per robot.
 
 - `rNN_agent`: written once per connection — who the agent is (JSON: id, name, hardware, host,
-  pid, software). The fleet adapter logs it, checks it against robots.yaml and marks the robot
-  online: the robot registers itself, nobody types its address.
+  pid, software, session). The fleet adapter logs it, checks it against robots.yaml and answers
+  in the same tag (`Answer`: accepted, or refused with the reason — e.g. the runtime drives that
+  robot itself, `driver: sim`); the agent drives only once accepted. The robot registers
+  itself, nobody types its address.
 - `rNN_report`: written every control cycle — the robot's pose and navigation state (JSON).
   The fleet adapter publishes it to the robot's read-only tags (`rNN_xpos`, ...), so clients
   cannot spoof a robot's position through those tags, and every report is a heartbeat.
@@ -38,10 +40,36 @@ class Registration:
     @classmethod
     def decode(cls, text: str) -> Registration:
         data = _object(text)
+        if "answer" in data:
+            raise ValueError("this is the runtime's answer, not a registration")
         if not isinstance(data.get("id"), str):
             raise ValueError("registration has no robot id")
         known = {key: data[key] for key in cls.__dataclass_fields__ if key in data}
         return cls(**known)
+
+
+@dataclass
+class Answer:
+    """The runtime's answer to a registration, written over it in `rNN_agent`."""
+
+    session: str  # the registration's session
+    accepted: bool
+    reason: str = ""
+
+    def encode(self) -> str:
+        return json.dumps({"answer": "accepted" if self.accepted else "refused", "session": self.session, "reason": self.reason},
+                          separators=(",", ":"))
+
+    @classmethod
+    def decode(cls, text: str) -> Answer | None:
+        """The answer in `text`, or None when `text` is not an answer (e.g. a registration)."""
+        try:
+            data = _object(text)
+        except ValueError:
+            return None
+        if data.get("answer") not in ("accepted", "refused"):
+            return None
+        return cls(str(data.get("session", "")), data["answer"] == "accepted", str(data.get("reason", "")))
 
 
 def encode_report(seq: int, report: Report, status_seq: int, status: bool | None) -> str:

@@ -81,6 +81,9 @@ class RobotSpec:
         return item in self.hardware
 
 
+NO_TEAM_LIMIT = 0  # a task's max_team_size when it states none (scenarios; tasks.yaml requires one)
+
+
 @dataclass(frozen=True)
 class TaskSpec:
     """One task (a transport job between two stations) and what it demands of a robot."""
@@ -93,7 +96,7 @@ class TaskSpec:
     min_load_capacity: float
     min_linear_speed: float
     min_angular_speed: float
-    max_team_size: int
+    max_team_size: int  # most robots serving it at once; NO_TEAM_LIMIT (0): any number
     requires: frozenset[Hardware]
     source: Point | None = None
     destination: Point | None = None

@@ -23,7 +23,6 @@ SCHEMA: dict[str, Any] = {
         "max_linear_speed": {"type": "number", "exclusiveMinimum": 0, "description": "Floor speed limit, m/s (default 0.2)."},
         "max_angular_speed": {"type": "number", "exclusiveMinimum": 0, "description": "Floor turn-rate limit, rad/s (default 0.4)."},
         "planning_resolution": {"type": "number", "exclusiveMinimum": 0, "description": "Cell size of the A* grid, m (default 0.1)."},
-        "goal_tolerance": {"type": "number", "exclusiveMinimum": 0, "description": "Goal reached within this distance, m (default 0.5)."},
         "heartbeat_timeout": DURATION,
     },
     "additionalProperties": False,

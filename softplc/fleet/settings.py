@@ -30,7 +30,6 @@ class FleetSettings:
     max_linear_speed: float = 0.2  # floor speed limit (thesis §3.7)
     max_angular_speed: float = 0.4
     planning_resolution: float = 0.1
-    goal_tolerance: float = 0.5
     heartbeat_timeout: float = 3.0
 
     @classmethod
@@ -74,7 +73,6 @@ class FleetSettings:
             max_linear_speed=float(section.get("max_linear_speed", 0.2)),
             max_angular_speed=float(section.get("max_angular_speed", 0.4)),
             planning_resolution=float(section.get("planning_resolution", 0.1)),
-            goal_tolerance=float(section.get("goal_tolerance", 0.5)),
             heartbeat_timeout=duration("heartbeat_timeout", 3.0),
         )
 

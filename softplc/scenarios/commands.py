@@ -134,7 +134,8 @@ def text_summary(summary: dict) -> str:  # type: ignore[type-arg]
     for robot, record in summary["robots"].items():
         trips = ", ".join(f"{task} {count}" for task, count in record["trips"].items()) or "none"
         failed = f"; navigation FAILED {record['navigation_failures']} times" if record["navigation_failures"] else ""
-        lines.append(f"  {robot}: trips {trips}; idle {record['idle_s']:.0f} s; utilisation {100 * record['utilisation']:.0f} %{failed}")
+        stuck = f"; stuck {record['stuck_s']:.0f} s (longest {record['longest_stuck_s']:.0f} s)" if record["stuck_s"] >= 0.5 else ""
+        lines.append(f"  {robot}: trips {trips}; idle {record['idle_s']:.0f} s{stuck}; utilisation {100 * record['utilisation']:.0f} %{failed}")
     levels = ", ".join(f"{task} in {v['in']:.0f} % / out {v['out']:.0f} %" for task, v in summary["levels_at_end"].items())
     lines.append(f"  levels at the end: {levels}")
     lines.append(f"  throughput {summary['throughput_items_per_min']:.2f} items/min")

@@ -63,6 +63,7 @@ def compare(
                 "delivered": sum(summary["delivered_per_task"].values()),
                 "throughput_items_per_min": summary["throughput_items_per_min"],
                 "idle_s": summary["idle_s_total"],
+                "stuck_s": summary["stuck_s_total"],
                 "goals": summary["goals_per_task"],
                 "wall_time_s": summary["wall_time_s"],
             })
@@ -74,15 +75,16 @@ def compare(
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """The rows as a Markdown table."""
-    lines = ["| plant | dispatcher | first storage full (s) | makespan, all full (s) | items delivered | throughput (items/min) | robot idle (s) | goals per task |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| plant | dispatcher | first storage full (s) | makespan, all full (s) | items delivered | throughput (items/min) "
+             "| robot idle (s) | robot stuck (s) | goals per task |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
         if "skipped" in row:
-            lines.append(f"| {row['plant']} | {row['dispatcher']} | — | — | — | — | — | ({row['skipped']}) |")
+            lines.append(f"| {row['plant']} | {row['dispatcher']} | — | — | — | — | — | — | ({row['skipped']}) |")
             continue
         makespan = f"{row['makespan_s']:.0f}" if row["makespan_s"] is not None else f"> {row['sim_duration_s']:.0f}"
         first = f"{row['first_full_s']:.0f}" if row["first_full_s"] is not None else "—"
         goals = " / ".join(str(count) for count in row["goals"].values())
         lines.append(f"| {row['plant']} | {row['dispatcher']} | {first} | {makespan} | {row['delivered']} | "
-                     f"{row['throughput_items_per_min']:.2f} | {row['idle_s']:.0f} | {goals} |")
+                     f"{row['throughput_items_per_min']:.2f} | {row['idle_s']:.0f} | {row['stuck_s']:.0f} | {goals} |")
     return "\n".join(lines)

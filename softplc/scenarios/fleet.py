@@ -15,7 +15,7 @@ from softplc.fleet.adapter import FleetAdapter
 from softplc.fleet.compat import compatible_tasks as compatible
 from softplc.fleet.floor import Floor
 from softplc.fleet.gridmap import load_map
-from softplc.fleet.robots import Hardware, Point, Pose, RobotFile, RobotSpec, TaskSpec
+from softplc.fleet.robots import NO_TEAM_LIMIT, Hardware, Point, Pose, RobotFile, RobotSpec, TaskSpec
 from softplc.runtime import Adapter
 from softplc.scenarios.spec import PROJECT, RobotParams, Scenario, TaskParams
 
@@ -66,11 +66,16 @@ def task_spec(task: TaskParams) -> TaskSpec:
         min_load_capacity=float(spec.get("min_load_capacity", 0.0)),
         min_linear_speed=float(spec.get("min_linear_speed", 0.0)),
         min_angular_speed=float(spec.get("min_angular_speed", 0.0)),
-        max_team_size=int(spec.get("max_team_size", len(task.spec) or 99)),
+        max_team_size=int(spec.get("max_team_size", NO_TEAM_LIMIT)),
         requires=frozenset(Hardware(name) for name in spec.get("requires", [])),
         source=Point(*task.source),
         destination=Point(*task.destination),
     )
+
+
+def team_sizes(scenario: Scenario) -> list[int]:
+    """Per task, the most robots that may serve it at once (NO_TEAM_LIMIT, 0: no limit, when it states none)."""
+    return [task_spec(task).max_team_size for task in scenario.tasks]
 
 
 def compatible_tasks(scenario: Scenario) -> list[list[int]]:

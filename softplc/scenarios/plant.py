@@ -156,18 +156,23 @@ def plant_document(scenario: Scenario, compatible: list[list[int]]) -> dict[str,
 
 def dispatcher_program(scenario: Scenario, compatible: list[list[int]]) -> dict[str, Any]:
     """The dispatcher's program entry for the scenario's dispatcher type."""
+    from softplc.scenarios.fleet import team_sizes
+
     tasks = [task.id for task in scenario.tasks]
     robots = [robot.id for robot in scenario.robots]
     kind = scenario.dispatcher
+    # Every dispatcher keeps each task's team within its max_team_size (0: no limit), counting
+    # the robots on a task from their tcurr and currloc (programs/teams.py).
+    teams = {tag: _each(robots, tag) for tag in ("tnext", "tcurr", "currloc")}
+    limits = {"max_team": team_sizes(scenario)} if any(size > 0 for size in team_sizes(scenario)) else {}
     if kind in ("weighting", "cooperative"):
         entry: dict[str, Any] = {
             "name": "dispatch",
             "program": "programs.task_weighting:TaskWeighting" if kind == "weighting" else
                        "programs.cooperative_dispatcher:CooperativeDispatcher",
-            "bind": {**{tag: _each(tasks, tag) for tag in ("iFr", "iBL", "iBC", "sPPi", "qFr", "qSL", "sCDr", "sPD", "Tw")},
-                     "tnext": _each(robots, "tnext")},
+            "bind": {**{tag: _each(tasks, tag) for tag in ("iFr", "iBL", "iBC", "sPPi", "qFr", "qSL", "sCDr", "sPD", "Tw")}, **teams},
         }
-        entry["params"] = {"skip_full": scenario.skip_full}
+        entry["params"] = {"skip_full": scenario.skip_full, **limits}
         if kind == "cooperative":
             entry["params"]["compatible"] = compatible
         return entry
@@ -175,8 +180,8 @@ def dispatcher_program(scenario: Scenario, compatible: list[list[int]]) -> dict[
         return {
             "name": "dispatch",
             "program": "programs.svm_dispatcher:SvmDispatcher",
-            "bind": {**{tag: _each(tasks, tag) for tag in ("iBL", "qSL", "sPD")}, "tnext": _each(robots, "tnext"), "svm_out": "svm_out"},
-            "params": {"model": str(scenario.model), "skip_full": scenario.skip_full},
+            "bind": {**{tag: _each(tasks, tag) for tag in ("iBL", "qSL", "sPD")}, **teams, "svm_out": "svm_out"},
+            "params": {"model": str(scenario.model), "skip_full": scenario.skip_full, **limits},
         }
     return {
         "name": "dispatch",
@@ -186,7 +191,7 @@ def dispatcher_program(scenario: Scenario, compatible: list[list[int]]) -> dict[
             "cost": _each(tasks, "Tw"),
             **{tag: _each(robots, tag) for tag in ("xpos", "ypos", "loadcap", "load", "currloc", "tcurr", "tnext")},
         },
-        "params": {"compatible": compatible},
+        "params": {"compatible": compatible, **limits},
     }
 
 

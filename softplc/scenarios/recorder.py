@@ -19,16 +19,23 @@ from pathlib import Path
 
 from softplc.tagdb import TagDatabase
 
-WAITING, TO_SOURCE, AT_DESTINATION = 0, 1, 4
+WAITING, TO_SOURCE, TO_DESTINATION, AT_DESTINATION = 0, 1, 3, 4
+PROGRESSING = ("moving", "planning")  # navigation states of a robot getting on with its trip
+STUCK_AFTER = 1.0  # s: shorter stops (the cycle between arriving and being taken, a brief yield) are not stuck
 
 
 @dataclass
 class RobotRecord:
-    """What one robot did: trips per task, items delivered, idle seconds, distance driven."""
+    """What one robot did: trips per task, items delivered, idle and stuck seconds, distance driven."""
 
     trips: dict[int, int] = field(default_factory=dict)
     delivered: dict[int, int] = field(default_factory=dict)
     idle: float = 0.0
+    # On the way to a station but not getting on with it for more than STUCK_AFTER (blocked,
+    # waiting for a station, failed, or stopped and not taken as arrived): the time, longest stretch.
+    stuck: float = 0.0
+    stuck_run: float = 0.0
+    longest_stuck: float = 0.0
     distance: float = 0.0
     failures: int = 0  # times its navigation gave up on a goal (navstate "failed")
     last_navstate: str = ""
@@ -72,6 +79,13 @@ class Recorder:
             currloc = value(f"{robot}_currloc")
             if record.last_currloc == WAITING:
                 record.idle += dt  # it spent the last interval without a task (waiting, or parking)
+            if record.last_currloc in (TO_SOURCE, TO_DESTINATION) and record.last_navstate not in PROGRESSING:
+                record.stuck_run += dt
+                if record.stuck_run > STUCK_AFTER:  # the whole stretch counts, once it is not a hand-over
+                    record.stuck += dt if record.stuck_run - dt > STUCK_AFTER else record.stuck_run
+                    record.longest_stuck = max(record.longest_stuck, record.stuck_run)
+            else:
+                record.stuck_run = 0.0
             task = value(f"{robot}_tcurr")
             if currloc == TO_SOURCE and record.last_currloc != TO_SOURCE:
                 record.trips[task] = record.trips.get(task, 0) + 1

@@ -1,4 +1,4 @@
-"""The JSON summary of a scenario run: duration, goals and trips, throughput, utilisation."""
+"""The JSON summary of a scenario run: duration, goals and trips, throughput, utilisation, stuck time."""
 
 from __future__ import annotations
 
@@ -20,7 +20,10 @@ def summarise(scenario: Scenario, db: TagDatabase, recorder: Recorder, duration:
             "trips": {tasks[number - 1]: count for number, count in sorted(record.trips.items()) if 1 <= number <= len(tasks)},
             "delivered": {tasks[number - 1]: count for number, count in sorted(record.delivered.items()) if 1 <= number <= len(tasks)},
             "idle_s": round(record.idle, 3),
-            "utilisation": round(1.0 - record.idle / duration, 4) if duration > 0 else 0.0,
+            "stuck_s": round(record.stuck, 3),
+            "longest_stuck_s": round(record.longest_stuck, 3),
+            # the share of the run spent on a task and getting on with it
+            "utilisation": round(1.0 - (record.idle + record.stuck) / duration, 4) if duration > 0 else 0.0,
             "distance_m": round(record.distance, 2),
             "navigation_failures": record.failures,
         }
@@ -41,6 +44,7 @@ def summarise(scenario: Scenario, db: TagDatabase, recorder: Recorder, duration:
         "full_at_s": full_at,
         "makespan_s": max(full_at.values()) if len(full_at) == len(tasks) else None,
         "idle_s_total": round(sum(robot["idle_s"] for robot in robots.values()), 3),
+        "stuck_s_total": round(sum(robot["stuck_s"] for robot in robots.values()), 3),
         "robots": robots,
         "trip_log": [[round(time, 1), robot, tasks[number - 1]] for time, robot, number in recorder.trip_log
                      if 1 <= number <= len(tasks)],
