@@ -35,6 +35,9 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     # Robot fleet (softplc.fleet)
     robots = parser.add_argument_group("robots")
     robots.add_argument("--no-fleet", action="store_true", help="do not drive the robots of the fleet: section")
+    # Historian (softplc.history) — issue 16
+    history = parser.add_argument_group("history")
+    history.add_argument("--no-history", action="store_true", help="record no history (the history: section)")
 
 
 def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) -> list[Adapter]:
@@ -44,7 +47,7 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
     """
     from softplc.yamlsource import ConfigError, Problem
 
-    builders = [_fleet]  # robots are not servers: --no-servers keeps them
+    builders = [_fleet, _history]  # robots and the historian are not servers: --no-servers keeps them
     if not (args is not None and getattr(args, "no_servers", False)):
         builders += [_opcua, _modbus]
     adapters: list[Adapter] = []
@@ -115,3 +118,29 @@ def _fleet(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter
     from softplc.fleet.adapter import FleetAdapter
 
     return [FleetAdapter.from_config(config)]
+
+
+# -- historian (softplc.history), issue 16 ----------------------------------------------------
+
+
+def _history(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    from softplc.history.settings import HistorySettings, problems
+    from softplc.systags import system_tag_definitions
+    from softplc.yamlsource import ConfigError
+
+    if not HistorySettings.configured(config):
+        return []
+    definitions = [*config.tags, *system_tag_definitions(config.tasks)]
+    found = problems(config, definitions)
+    if found:
+        raise ConfigError(found)
+    settings = HistorySettings.from_config(config)
+    if not settings.enabled or bool(getattr(args, "no_history", False)):
+        return []
+    if bool(getattr(args, "sim", False)) and not settings.sim:
+        return []
+    from softplc.history.recorder import HistoryRecorder
+
+    policies = settings.policies(definitions)
+    types = {d.name: (d.type.value, d.unit) for d in definitions if d.name in policies}
+    return [HistoryRecorder(settings, config.name, policies, types)]

@@ -10,6 +10,7 @@ from typing import Any
 
 from softplc.datatypes import TYPE_NAMES
 from softplc.durations import DURATION_REGEX
+from softplc.history.settings import HISTORY_SCHEMA  # issue 16: the historian's section (plain data)
 
 NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
 NAME_RULE = "letters, digits and _, not starting with a digit"
@@ -220,6 +221,7 @@ CONFIG_SCHEMA: dict[str, Any] = {
             "additionalProperties": False,
         },
         "fleet": FLEET,
+        "history": HISTORY_SCHEMA,  # issue 16 (softplc/history/settings.py)
         "runtime": {
             "type": "object",
             "properties": {
