@@ -106,14 +106,18 @@ class HistorySink:
         if unknown:
             self._register(connection, database, [self.tags.get(name) or TagInfo(name, "float64") for name in dict.fromkeys(unknown)])
         latest = self.latest
+        good = Quality.GOOD
+        minute, hour = cells["m1"], cells["h1"]
         for name, when, value, quality in rows:
             if not current_start <= when < current_stop:
                 current_start = math.floor(when / size) * size
                 current_stop = current_start + size
                 current = by_partition.setdefault(current_start, [])
             tag = ids[name]
-            code = QUALITY_CODES[quality]
-            if isinstance(value, str):
+            code = 0 if quality is good else QUALITY_CODES[quality]
+            if when > latest:
+                latest = when
+            if value.__class__ is str:
                 current.append((tag, when, None, value, code))
                 continue
             number = float(value)
@@ -121,20 +125,19 @@ class HistorySink:
                 current.append((tag, when, None, None, code))
                 continue
             current.append((tag, when, number, None, code))
-            if code != 2:
-                for suffix, width in LEVELS:
-                    key = (tag, when - when % width)
-                    cell = cells[suffix].get(key)
-                    if cell is None:
-                        cells[suffix][key] = [1, number, when, number, when]
-                    else:
-                        cell[0] += 1
-                        if number < cell[1]:
-                            cell[1], cell[2] = number, when
-                        if number > cell[3]:
-                            cell[3], cell[4] = number, when
-            if when > latest:
-                latest = when
+            if code == 2:
+                continue
+            for level, width in ((minute, 60.0), (hour, 3600.0)):
+                key = (tag, when - when % width)
+                cell = level.get(key)
+                if cell is None:
+                    level[key] = [1, number, when, number, when]
+                else:
+                    cell[0] += 1
+                    if number < cell[1]:
+                        cell[1], cell[2] = number, when
+                    elif number > cell[3]:
+                        cell[3], cell[4] = number, when
         self.latest = latest
         for start, samples in by_partition.items():
             table = self._partition(connection, database, start)
