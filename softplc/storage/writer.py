@@ -202,7 +202,7 @@ class BatchWriter:
             for name, rows in taken.items():
                 self._sinks[name].write(connection, self.database, rows)
             connection.commit()
-        except driver_errors() + (OSError, ValueError, TypeError) as error:
+        except Exception as error:  # noqa: BLE001 — a driver error, a full disk, or a bug in a sink: rows kept, error logged
             _rollback_quietly(connection)
             self._failed(error)
             self._close()  # reconnect next time: the connection may be what broke
@@ -229,7 +229,7 @@ class BatchWriter:
             for sink in self._sinks.values():
                 sink.maintain(connection, self.database)
                 connection.commit()
-        except driver_errors() + (OSError,) as error:
+        except Exception as error:  # noqa: BLE001
             _rollback_quietly(connection)
             self._failed(error)
         finally:
