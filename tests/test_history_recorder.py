@@ -185,3 +185,21 @@ def test_the_default_plant_records_its_robot_and_task_tags() -> None:
     for name in ("r01_xpos", "r03_ypos", "r02_status", "r01_navstate", "t01_iBL", "t02_qSL", "t01_Tw"):
         assert name in policies, name
     assert policies["r01_xpos"].compression is not None and "r01_route" not in policies
+
+
+@pytest.mark.parametrize("simulated", [True, False])
+async def test_a_store_that_cannot_be_opened_stops_the_start_with_the_reason(tmp_path: Path, simulated: bool) -> None:
+    from softplc.clock import RealClock
+    from softplc.runtime import AdapterError
+
+    path = tmp_path / "tagdb.yaml"
+    path.write_text(textwrap.dedent(PLANT))
+    blocker = tmp_path / "not-a-directory"
+    blocker.write_text("a file where the state directory should be")
+    config = load_config(path)
+    runtime = Runtime(config, SimClock() if simulated else RealClock(), state_dir=blocker)
+    for adapter in build_adapters(config, None):
+        runtime.add_adapter(adapter)
+    name = "history-sim.sqlite" if simulated else "history.sqlite"
+    with pytest.raises(AdapterError, match=rf"history: cannot open SQLite .*not-a-directory/{name}"):
+        await runtime.start()

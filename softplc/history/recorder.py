@@ -118,7 +118,10 @@ class HistoryRecorder:
             # A simulated run starts at the same simulated instant every time: its history
             # replaces the previous run's instead of overlapping it.
             for suffix in ("", "-wal", "-shm"):
-                self.storage.path.with_name(self.storage.path.name + suffix).unlink(missing_ok=True)
+                try:
+                    self.storage.path.with_name(self.storage.path.name + suffix).unlink(missing_ok=True)
+                except OSError as error:
+                    raise AdapterError(f"history: cannot open SQLite {self.storage.path}: {error}") from None
         infos = [TagInfo(name, kind, unit, self.policies[name].stepped) for name, (kind, unit) in self.types.items()]
         sink = HistorySink(self.plant, infos, partition=self.settings.partition, retention=self.settings.retention)
         database = Database(self.storage)
