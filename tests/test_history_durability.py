@@ -24,9 +24,11 @@ from conftest import REPO
 
 SUPPORT = REPO / "tests" / "history_support.py"
 FLUSH = 0.25  # s
-# A commit of one flush period's rows takes its own time, and the child may be descheduled on
-# a shared machine: the bound checked is the flush period plus this allowance.
-COMMIT_ALLOWANCE = 0.25
+# A commit of one flush period's rows takes its own time (tens of ms), and on a shared 2-core
+# machine the child may wait for the CPU for hundreds of ms (measured: 0.11-0.32 s of loss at
+# load 3-5, 0.55 s once at load 7): the bound checked is the flush period plus this allowance.
+# With the writer's flush period wrongly at 2 s the loss is 2-2.6 s, far beyond it.
+COMMIT_ALLOWANCE = 0.5
 TAGS = 200
 
 

@@ -28,6 +28,7 @@ tasks:
     interval: 100ms
     programs:
       - {{name: wave, program: "{SUPPORT}:Wave", bind: {{wave: wave, steps: steps, state: state}}}}
+servers: {{opcua: {{enabled: false}}, modbus: {{enabled: false}}}}  # no server on a fixed port
 history:
   record:
     - {{tags: [wave, steps, state]}}

@@ -35,6 +35,7 @@ tasks:
     interval: 100ms
     programs:
       - {{name: wave, program: "{SUPPORT}:Wave", bind: {{wave: wave, steps: steps, state: state}}, params: {{period: 10.0}}}}
+servers: {{opcua: {{enabled: false}}, modbus: {{enabled: false}}}}  # no server on a fixed port
 history:
   flush_period: 100ms
   record:

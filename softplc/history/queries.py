@@ -123,7 +123,7 @@ class HistoryReader:
     def plot(self, tag: str, start: float, end: float, max_points: int = DEFAULT_PLOT_POINTS) -> Plot:
         """At most `max_points` points over [start, end): raw when they fit, else min and max per bucket.
 
-        Long ranges read the per-minute or per-hour min/max cells instead of every sample; edge
+        Long ranges read the 10-second, per-minute or per-hour min/max cells instead of every sample; edge
         cells that straddle start or end are read raw, so every extreme inside the range is kept.
         """
         import numpy as np
