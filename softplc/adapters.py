@@ -42,6 +42,9 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     # Robot fleet (softplc.fleet)
     robots = parser.add_argument_group("robots")
     robots.add_argument("--no-fleet", action="store_true", help="do not drive the robots of the fleet: section")
+    # Historian (softplc.history)
+    history = parser.add_argument_group("history")
+    history.add_argument("--no-history", action="store_true", help="record no history (the history: section)")
 
 
 def simulation_port(args: argparse.Namespace | None, *flags: str) -> int | None:
@@ -65,7 +68,7 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
     """
     from softplc.yamlsource import ConfigError, Problem
 
-    builders = [_fleet]  # robots are not servers: --no-servers keeps them
+    builders = [_fleet, _history]  # robots and the historian are not servers: --no-servers keeps them
     if not (args is not None and getattr(args, "no_servers", False)):
         builders += [_opcua, _modbus]
     adapters: list[Adapter] = []
@@ -158,3 +161,27 @@ def _fleet(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter
     from softplc.fleet.adapter import FleetAdapter
 
     return [FleetAdapter.from_config(config)]
+
+
+# -- historian (softplc.history) ----------------------------------------------------
+
+
+def _history(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    from softplc.history.section import tag_rules
+    from softplc.history.settings import HistorySettings
+    from softplc.systags import runtime_tag_definitions
+
+    rules = tag_rules(config)
+    if not HistorySettings.configured(config) and not rules:
+        return []
+    definitions = [*config.tags, *runtime_tag_definitions(config)]
+    settings = HistorySettings.from_config(config, rules)  # checked by its section owner (softplc.history.section)
+    if not settings.enabled or bool(getattr(args, "no_history", False)):
+        return []
+    if bool(getattr(args, "sim", False)) and not settings.sim:
+        return []
+    from softplc.history.recorder import HistoryRecorder
+
+    policies = settings.policies(definitions)
+    types = {d.name: (d.type.value, d.unit) for d in definitions if d.name in policies}
+    return [HistoryRecorder(settings, config.name, policies, types)]

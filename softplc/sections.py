@@ -32,6 +32,7 @@ SECTION_MODULES: tuple[str, ...] = (
     "softplc.opcua.section",
     "softplc.modbus.section",
     "softplc.fleet.section",
+    "softplc.history.section",
 )
 
 

@@ -1,5 +1,5 @@
-"""A section owner written the way a new adapter writes one: `history:` at the top level, a
-`history:` key on tags and templates, and a `record:` key on programs. tests/test_config_sections.py
+"""A section owner written the way a new adapter writes one: `notebook:` at the top level, a
+`notebook:` key on tags and templates, and a `record:` key on programs. tests/test_config_sections.py
 plugs it into the registry (softplc.sections.SECTION_MODULES)."""
 
 from __future__ import annotations
@@ -30,31 +30,31 @@ TAG_KEY: dict[str, Any] = {
 
 def problems(config: PlantConfig) -> list[Problem]:
     found = []
-    section = config.section("history")
+    section = config.section("notebook")
     if section is not None and "interval" in section:
         _, message = check_duration(section["interval"], "interval")
         if message:
-            found.append(config.problem(("history", "interval"), message))
+            found.append(config.problem(("notebook", "interval"), message))
     for tag in config.tags:
-        options = tag.options.get("history")
+        options = tag.options.get("notebook")
         if isinstance(options, dict) and "deadband" in options and not tag.type.is_numeric:
-            found.append(config.problem((*config.option_path(tag.name, "history"), "deadband"),
+            found.append(config.problem((*config.option_path(tag.name, "notebook"), "deadband"),
                                         f"a deadband needs a numeric tag, and '{tag.name}' is {tag.type.value}"))
     return found
 
 
 def tags(config: PlantConfig) -> list[TagDef]:
     """A tag the owner adds to the runtime, like the alarm summary tags."""
-    if config.section("history") is None:
+    if config.section("notebook") is None:
         return []
-    return [TagDef("_sys.history.rows", DataType.UINT32, 0, description="rows recorded", access=Access.RO, runtime_only=True)]
+    return [TagDef("_sys.notebook.rows", DataType.UINT32, 0, description="rows recorded", access=Access.RO, runtime_only=True)]
 
 
 SECTION = Section(
-    path=("history",),
+    path=("notebook",),
     schema=SCHEMA,
-    tag_keys={"history": TAG_KEY},
-    template_keys={"history": TAG_KEY},
+    tag_keys={"notebook": TAG_KEY},
+    template_keys={"notebook": TAG_KEY},
     program_keys={"record": {"type": "boolean"}},
     problems=problems,
     tags=tags,

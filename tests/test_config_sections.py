@@ -30,7 +30,7 @@ def _reset() -> None:
 
 
 @pytest.fixture
-def with_history(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+def with_notebook(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     """The registry with the example owner of tests/section_example.py added."""
     monkeypatch.setattr(sections, "SECTION_MODULES", (*sections.SECTION_MODULES, "section_example"))
     _reset()
@@ -47,16 +47,16 @@ def write(tmp_path: Path, text: str) -> Path:
 
 PLANT = f"""\
     version: 1
-    history: {{database: h.sqlite, interval: 1s}}
+    notebook: {{database: h.sqlite, interval: 1s}}
     templates:
       robot:
         instances: [r01, r02]
-        history: {{deadband: 0.5}}
+        notebook: {{deadband: 0.5}}
         tags:
-          xpos: {{type: float64, history: {{enabled: false}}}}
+          xpos: {{type: float64, notebook: {{enabled: false}}}}
           ypos: {{type: float64}}
     tags:
-      level: {{type: float32, history: {{deadband: 2}}}}
+      level: {{type: float32, notebook: {{deadband: 2}}}}
       plain: {{type: float32}}
     tasks:
       fast:
@@ -79,62 +79,62 @@ def test_every_owner_module_is_light_to_import() -> None:
 
 def test_the_existing_owners_are_registered_with_their_sections_and_keys() -> None:
     paths = [section.path for section in sections.registered()]
-    assert paths == [("runtime",), ("servers", "opcua"), ("servers", "modbus"), ("fleet",)]
-    assert set(sections.tag_keys()) == {"modbus"}
+    assert paths == [("runtime",), ("servers", "opcua"), ("servers", "modbus"), ("fleet",), ("history",)]
+    assert set(sections.tag_keys()) == {"modbus", "history"}
     properties = sections.config_schema()["properties"]
     assert set(properties["servers"]["properties"]) == {"opcua", "modbus"}
     assert "modbus" in properties["tags"]["additionalProperties"]["properties"]
 
 
-def test_a_new_owner_plugs_in_its_section_tag_template_and_program_keys(with_history, tmp_path: Path) -> None:
+def test_a_new_owner_plugs_in_its_section_tag_template_and_program_keys(with_notebook, tmp_path: Path) -> None:
     config = load_config(write(tmp_path, PLANT))
-    assert config.section("history") == {"database": "h.sqlite", "interval": "1s"}
+    assert config.section("notebook") == {"database": "h.sqlite", "interval": "1s"}
     # a template's key applies to each instance's tags; a tag's own mapping is merged over it
-    assert config.tag("r01_ypos").options == {"history": {"deadband": 0.5}}
-    assert config.tag("r02_xpos").options == {"history": {"deadband": 0.5, "enabled": False}}
-    assert config.tag("level").options == {"history": {"deadband": 2}}
+    assert config.tag("r01_ypos").options == {"notebook": {"deadband": 0.5}}
+    assert config.tag("r02_xpos").options == {"notebook": {"deadband": 0.5, "enabled": False}}
+    assert config.tag("level").options == {"notebook": {"deadband": 2}}
     assert config.tag("plain").options == {}
     assert config.tasks[0].programs[0].options == {"record": True}
     # and `softplc schema` tells editors about it
     printed = sections.editor_schema()
-    assert "history" in printed["properties"] and "record" in json.dumps(printed)
+    assert "notebook" in printed["properties"] and "record" in json.dumps(printed)
     jsonschema.Draft202012Validator.check_schema(printed)
 
 
 def test_without_its_owner_the_keys_are_unknown(tmp_path: Path) -> None:
-    path = write(tmp_path, "version: 1\nhistory: {}\ntags:\n  a: {type: float32, history: {deadband: 1}}\n")
+    path = write(tmp_path, "version: 1\nnotebook: {}\ntags:\n  a: {type: float32, notebook: {deadband: 1}}\n")
     with pytest.raises(ConfigError) as caught:
         load_config(path)
-    assert [str(p) for p in caught.value.problems] == [
-        f"{path}:2:1: unknown key 'history'; expected one of: version, plant, templates, tags, tasks, runtime, servers, fleet",
-        f"{path}:4:22: unknown key 'history'; expected one of: type, initial, unit, description, access, min, max, retain, group, shared_output, modbus",
-    ]
+    top, tag = [str(p) for p in caught.value.problems]
+    assert top.startswith(f"{path}:2:1: unknown key 'notebook'; expected one of: version, plant, templates, tags, tasks, runtime, servers, fleet")
+    assert tag.startswith(f"{path}:4:22: unknown key 'notebook'; expected one of: type, initial, unit, description, access, min, max, retain, group, shared_output, modbus")
+    assert "notebook" not in top.split("expected one of:")[1] and "notebook" not in tag.split("expected one of:")[1]
 
 
-def test_an_owners_schema_and_its_check_report_located_problems(with_history, tmp_path: Path, capsys) -> None:
+def test_an_owners_schema_and_its_check_report_located_problems(with_notebook, tmp_path: Path, capsys) -> None:
     path = write(tmp_path, """\
         version: 1
-        history: {interval: 10 parsecs}
+        notebook: {interval: 10 parsecs}
         templates:
           robot:
             instances: [r01, r02]
-            history: {deadband: 1}
+            notebook: {deadband: 1}
             tags:
               name: {type: string}
         tags:
-          label: {type: string, history: {deadband: 1}}
-          level: {type: float32, history: {deadband: -1}}
+          label: {type: string, notebook: {deadband: 1}}
+          level: {type: float32, notebook: {deadband: -1}}
         """)
     assert main(["check", str(path)]) == 2
     # the schema first: the owner's check runs only on a file whose structure is sound
-    assert capsys.readouterr().err.splitlines() == [f"{path}:11:46: 'deadband' must be at least 0, not -1", "1 problem found"]
+    assert capsys.readouterr().err.splitlines() == [f"{path}:11:47: 'deadband' must be at least 0, not -1", "1 problem found"]
     path.write_text(path.read_text().replace("deadband: -1", "deadband: 1"))
     assert main(["check", str(path)]) == 2
     assert capsys.readouterr().err.splitlines() == [
-        f"{path}:2:21: bad interval '10 parsecs': write a duration such as 10ms, 100ms or 1s",
-        f"{path}:6:25: a deadband needs a numeric tag, and 'r01_name' is string",
-        f"{path}:6:25: a deadband needs a numeric tag, and 'r02_name' is string",
-        f"{path}:10:45: a deadband needs a numeric tag, and 'label' is string",
+        f"{path}:2:22: bad interval '10 parsecs': write a duration such as 10ms, 100ms or 1s",
+        f"{path}:6:26: a deadband needs a numeric tag, and 'r01_name' is string",
+        f"{path}:6:26: a deadband needs a numeric tag, and 'r02_name' is string",
+        f"{path}:10:46: a deadband needs a numeric tag, and 'label' is string",
         "4 problems found",
     ]
 
@@ -153,19 +153,19 @@ def test_owners_cannot_claim_the_same_section_or_key_or_a_core_one() -> None:
         schema.build_schema((Section(path=("x",), schema={}, tag_keys={"unit": {}}),))
 
 
-def test_an_owner_adds_tags_to_the_runtime_like_the_system_tags(with_history, tmp_path: Path, capsys) -> None:
+def test_an_owner_adds_tags_to_the_runtime_like_the_system_tags(with_notebook, tmp_path: Path, capsys) -> None:
     from softplc.clock import SimClock
     from softplc.modbus.address_map import Table, build_address_map
     from softplc.modbus.settings import ModbusSettings
     from softplc.runtime import Runtime
 
     path = tmp_path / "plant.yaml"
-    path.write_text("version: 1\ntags: {level: {type: float32}}\nhistory: {database: h.sqlite}\nservers: {modbus: {}}\n")
+    path.write_text("version: 1\ntags: {level: {type: float32}}\nnotebook: {database: h.sqlite}\nservers: {modbus: {}}\n")
     config = load_config(path)
-    assert [tag.name for tag in config.contributed_tags] == ["_sys.history.rows"]
+    assert [tag.name for tag in config.contributed_tags] == ["_sys.notebook.rows"]
     runtime = Runtime(config, SimClock(), state_dir=tmp_path / "state")
-    assert runtime.db.value("_sys.history.rows") == 0 and not runtime.db.writable("_sys.history.rows", Role.ENGINEER)
+    assert runtime.db.value("_sys.notebook.rows") == 0 and not runtime.db.writable("_sys.notebook.rows", Role.ENGINEER)
     served = build_address_map(config, ModbusSettings.from_servers(config.servers))
-    assert "_sys.history.rows" in {mapping.name for table in Table for mapping in served.in_table(table)}
+    assert "_sys.notebook.rows" in {mapping.name for table in Table for mapping in served.in_table(table)}
     assert main(["tags", str(path), "--format", "json"]) == 0
-    assert "_sys.history.rows" in {row["name"] for row in json.loads(capsys.readouterr().out)}
+    assert "_sys.notebook.rows" in {row["name"] for row in json.loads(capsys.readouterr().out)}

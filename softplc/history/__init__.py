@@ -1,0 +1,17 @@
+"""The historian: records tag values (deadband, swinging-door compression) into a time-partitioned store.
+
+Modules: `settings` (the `history:` section and its rules), `swinging_door` (the compression
+algorithm), `recorder` (the adapter), `store` (tables and the writer-side sink), `queries`
+(raw, plot, processed, at time), `aggregates` (interpolation and Part 13 aggregates), `export`
+(`softplc history export`). See docs/history.md. The core never imports this package.
+"""
+
+from softplc.lazy import lazy_exports
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "softplc.history.settings": ("HistorySettings", "Rule", "TagPolicy", "problems", "tag_rule"),
+    "softplc.history.recorder": ("HistoryRecorder", "TagFilter"),
+    "softplc.history.queries": ("Continuation", "HistoryReader", "Plot", "RawPage", "UnknownTag"),
+    "softplc.history.aggregates": ("Aggregate", "Sample"),
+    "softplc.history.swinging_door": ("SwingingDoor",),
+})
