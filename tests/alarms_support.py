@@ -58,11 +58,15 @@ class Step:
     quality: Quality | None = None
     command: str = ""
     arguments: dict[str, Any] | None = None
-    role: str = "operator"
+    role: str = ""  # a write: "" is a driver inside the runtime, else a client of that role
 
 
 def write(at: float, tag: str, value: Any) -> Step:
     return Step(at, tag=tag, value=value)
+
+
+def client_write(at: float, tag: str, value: Any, role: str) -> Step:
+    return Step(at, tag=tag, value=value, role=role)
 
 
 def bad(at: float, tag: str) -> Step:
@@ -74,6 +78,7 @@ def good(at: float, tag: str) -> Step:
 
 
 def call(at: float, command: str, role: str = "operator", **arguments: Any) -> Step:
+    """A command, as an operator unless `role` says otherwise."""
     return Step(at, command=command, arguments=arguments, role=role)
 
 
@@ -116,7 +121,8 @@ async def simulate(directory: Path, text: str, steps: Sequence[Step], duration: 
             elif step.quality is not None:
                 runtime.db.submit_quality([step.tag], step.quality, DRIVER)
             else:
-                runtime.db.submit([(step.tag, step.value)], DRIVER)
+                refused = runtime.db.submit([(step.tag, step.value)], PEOPLE[step.role] if step.role else DRIVER)[0]
+                results.append((round(clock.now(), 3), f"write {step.tag}", refused))
 
     runtime.spawn(script(), "script")
     await runtime.run(duration=duration)

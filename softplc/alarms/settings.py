@@ -339,7 +339,7 @@ class _Checker:
         try:
             return Condition(text, self.tags)
         except ExpressionError as error:
-            self.problem(path, f"{what}: {error}")
+            self.problem(path, str(error) if what == "condition" else f"{what}: {error}")
             return None
 
     def duration(self, value: Any, path: tuple[Any, ...], what: str, *, positive: bool = False) -> float | None:
