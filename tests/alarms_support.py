@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import textwrap
-from collections.abc import Sequence
+from collections.abc import AsyncIterator, Sequence
+from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from softplc.adapters import build_adapters
-from softplc.clock import SimClock
+from softplc.clock import RealClock, SimClock
 from softplc.commands import CommandRefused
 from softplc.config import load_config
 from softplc.events import Event
@@ -127,3 +128,29 @@ async def simulate(directory: Path, text: str, steps: Sequence[Step], duration: 
     runtime.spawn(script(), "script")
     await runtime.run(duration=duration)
     return Run(runtime, events, results)
+
+
+@asynccontextmanager
+async def running_alarm_plant(directory: Path, text: str, *, modbus: bool = False) -> AsyncIterator[tuple[Runtime, Any]]:
+    """The plant in real time with its alarms and an OPC UA server on a free loopback port (users of every role)."""
+    from softplc.opcua import OpcUaServer, OpcUaSettings
+    from tests.opcua_support import add_users
+
+    path = directory / "tagdb.yaml"
+    path.write_text(text)
+    config = load_config(path)
+    state_dir = directory / "state"
+    state_dir.mkdir(exist_ok=True)
+    if not (state_dir / "users.yaml").exists():
+        add_users(state_dir)
+    runtime = Runtime(config, RealClock(), state_dir=state_dir)
+    for adapter in build_adapters(config, None):
+        if adapter.name == "alarms":
+            runtime.add_adapter(adapter)
+    server = OpcUaServer(OpcUaSettings(endpoint="opc.tcp://127.0.0.1:0/softplc/"))
+    runtime.add_adapter(server)
+    await runtime.start()
+    try:
+        yield runtime, server
+    finally:
+        await runtime.stop()

@@ -9,7 +9,10 @@ their reason or comment. Who may do what is not checked here but by the command 
 from __future__ import annotations
 
 from softplc.alarms.engine import Alarm, AlarmEngine
-from softplc.alarms.model import AlarmRefused, AlarmSnapshot, NothingToAcknowledge, Shelving, ShelveKind, Transition, Trigger, next_state
+from softplc.alarms.model import (
+    AlarmRefused, AlarmSnapshot, NothingToAcknowledge, NotShelved, ServiceUnchanged, Shelving, ShelveKind, ShelvingTimeOutOfRange, Transition,
+    Trigger, next_state,
+)
 from softplc.durations import format_duration
 from softplc.tagdb import Origin
 
@@ -53,7 +56,7 @@ class AlarmActions:
         if one_shot == (duration is not None):
             raise AlarmRefused("shelve either for a duration or one-shot (until it returns to normal), not both or neither")
         if duration is not None and not 0 < duration <= longest:
-            raise AlarmRefused(f"cannot shelve {name} for {format_duration(duration)}: the longest shelving is {format_duration(longest)} (alarms.shelve_max)")
+            raise ShelvingTimeOutOfRange(f"cannot shelve {name} for {format_duration(duration)}: the longest shelving is {format_duration(longest)} (alarms.shelve_max)")
         seconds = longest if one_shot else float(duration or 0.0)
         before = engine.counted(alarm)
         was_hidden = alarm.hidden
@@ -67,7 +70,7 @@ class AlarmActions:
     def unshelve(self, name: str, origin: Origin, reason: str = "") -> AlarmSnapshot:
         alarm = self.engine.get(name)
         if alarm.shelving is None:
-            raise AlarmRefused(f"alarm {name} is not shelved")
+            raise NotShelved(f"alarm {name} is not shelved")
         self.engine.end_shelving(alarm, Transition.UNSHELVED, origin, reason)
         return self.engine.snapshot(alarm)
 
@@ -90,7 +93,7 @@ class AlarmActions:
         engine = self.engine
         alarm = engine.get(name)
         if alarm.out_of_service == out:
-            raise AlarmRefused(f"alarm {name} is {'out of' if out else 'in'} service already")
+            raise ServiceUnchanged(f"alarm {name} is {'out of' if out else 'in'} service already")
         if out and not reason.strip():
             raise AlarmRefused(f"taking {name} out of service needs a reason")
         before = engine.counted(alarm)

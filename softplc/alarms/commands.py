@@ -58,6 +58,7 @@ def register_alarm_commands(commands: Commands, engine: AlarmEngine, actions: Al
         return {
             "alarms": len(engine.alarms), "active": engine.active_count, "unacknowledged": engine.unacknowledged_count,
             "shelved": engine.shelved_count, "highest_priority": engine.highest_active_priority,
+            "shelve_max": engine.settings.shelve_max,
             "most_severe_unacknowledged": engine.snapshot(worst).to_dict() if worst is not None else None,
         }
 

@@ -333,6 +333,7 @@ class AlarmEngine:
             suppressed=alarm.suppressed, out_of_service=alarm.out_of_service, since=alarm.since,
             active_since=alarm.active_since, last_transition=alarm.last_transition, sequence=alarm.sequence,
             comment=alarm.comment, comment_user=alarm.comment_user, tags=definition.reads,
+            limits=tuple((level.name, level.limit) for level in definition.levels),
         )
 
     def snapshots(self, alarms: Iterable[Alarm] | None = None) -> list[AlarmSnapshot]:

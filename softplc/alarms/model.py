@@ -198,6 +198,7 @@ class AlarmSnapshot:
     comment: str = ""  # the last comment, with its author in `comment_user`
     comment_user: str = ""
     tags: tuple[str, ...] = field(default=())  # every tag the alarm reads
+    limits: tuple[tuple[str, float], ...] = ()  # limit alarms: (level, limit) of each level configured
 
     @property
     def acknowledged(self) -> bool:
@@ -211,6 +212,7 @@ class AlarmSnapshot:
         data["annunciation"] = self.annunciation.value
         data["acknowledged"] = self.acknowledged
         data["tags"] = list(self.tags)
+        data["limits"] = dict(self.limits)
         if self.shelving is not None:
             data["shelving"] = {**asdict(self.shelving), "kind": self.shelving.kind.value}
         return data
@@ -226,3 +228,15 @@ class UnknownAlarm(AlarmRefused):
 
 class NothingToAcknowledge(AlarmRefused):
     """The alarm is acknowledged already, or normal (OPC UA: BadConditionBranchAlreadyAcked)."""
+
+
+class NotShelved(AlarmRefused):
+    """Unshelving an alarm that is not shelved (OPC UA: BadConditionNotShelved)."""
+
+
+class ShelvingTimeOutOfRange(AlarmRefused):
+    """A shelving time of zero or beyond shelve_max (OPC UA: BadShelvingTimeOutOfRange)."""
+
+
+class ServiceUnchanged(AlarmRefused):
+    """Out of service (or in service) already (OPC UA: BadConditionAlreadyDisabled / ...Enabled)."""
