@@ -141,7 +141,9 @@ class AlarmConditions:
                 _link(node, aspace[ua.NodeId(method)], _I.HasComponent, None, inverse=False)
             for method in _SHELVING_METHODS:
                 _link(shelving, aspace[ua.NodeId(method)], _I.HasComponent, None, inverse=False)
-            condition = _Condition(snapshot.name, node_id, shelving_id, source, emitting, _new_event(event_class, node_id, source, snapshot))
+            event = _new_event(event_class, node_id, source, snapshot)
+            event.EventType = EventTypeId.of(aspace, type_id)
+            condition = _Condition(snapshot.name, node_id, shelving_id, source, emitting, event)
             self.by_node[node_id] = self.by_node[shelving_id] = self.by_name[snapshot.name] = condition
 
     def _bind_methods(self) -> None:
@@ -296,6 +298,43 @@ class AlarmConditions:
         for node in self.notifiers:
             marker.emitting_node = node
             await items.trigger_event(marker, monitored_item)
+
+
+class EventTypeId(ua.NodeId):
+    """An event's EventType that also equals its supertypes' NodeIds.
+
+    asyncua's event filter evaluates OfType as plain equality of EventType; Part 4 (7.7.3)
+    wants every subtype to match, so a client filtering OfType AcknowledgeableConditionType
+    (node-opcua's alarm monitoring, UaExpert) would get none of our LimitAlarmType events.
+    Only the filter compares EventTypes; everywhere else this is an ordinary NodeId.
+    """
+
+    __slots__ = ()
+    supertypes: dict[Any, frozenset[ua.NodeId]] = {}
+
+    def __eq__(self, other: object) -> bool:
+        if ua.NodeId.__eq__(self, other):
+            return True
+        return isinstance(other, ua.NodeId) and other in EventTypeId.supertypes.get(self.Identifier, frozenset())
+
+    def __ne__(self, other: object) -> bool:
+        return not self.__eq__(other)
+
+    __hash__ = ua.NodeId.__hash__
+
+    @classmethod
+    def of(cls, aspace: Any, type_id: int) -> EventTypeId:
+        """The EventType id of `type_id`, knowing its supertypes from the address space."""
+        found: set[ua.NodeId] = set()
+        current: ua.NodeId | None = ua.NodeId(type_id)
+        while current is not None and current in aspace:
+            parent = next((ref.NodeId for ref in aspace[current].references
+                           if not ref.IsForward and ref.ReferenceTypeId == ua.NodeId(_I.HasSubtype)), None)
+            if parent is not None:
+                found.add(ua.NodeId(parent.Identifier, parent.NamespaceIndex))
+            current = parent
+        cls.supertypes[type_id] = frozenset(found)
+        return cls(type_id)
 
 
 class AlarmSnapshotView:
