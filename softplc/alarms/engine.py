@@ -16,9 +16,10 @@ from __future__ import annotations
 import heapq
 import itertools
 import logging
+import math
 from collections.abc import Callable, Iterable, Sequence
 
-from softplc.alarms.evaluation import Check, IncreaseCheck, make_check
+from softplc.alarms.evaluation import Check, DiscreteCheck, IncreaseCheck, LimitCheck, compile_condition, make_check
 from softplc.alarms.messages import render
 from softplc.alarms.model import (
     AlarmSnapshot, AlarmState, Priority, Shelving, ShelveKind, Transition, Trigger, UnknownAlarm, effective_state, next_state, released_state,
@@ -40,14 +41,27 @@ _SEVERER = {("hi", "hihi"), ("lo", "lolo")}  # (from, to) pairs that escalate on
 class Alarm:
     """One alarm's definition and mutable state (the engine's alone; adapters get snapshots)."""
 
-    __slots__ = ("index", "definition", "check", "level", "active", "pending_due", "delay_generation", "annunciation",
+    __slots__ = ("index", "definition", "check", "suppress", "plain", "fast", "watched", "low_edge", "high_edge", "alarm_values", "level", "active", "pending_due", "delay_generation", "annunciation",
                  "shelving", "shelve_generation", "suppressed", "out_of_service", "since", "active_since", "last_transition",
                  "sequence", "message", "value", "comment", "comment_user")
 
-    def __init__(self, index: int, definition: AlarmDefinition, check: Check) -> None:
+    def __init__(self, index: int, definition: AlarmDefinition, check: Check, suppress: Callable[[], object] | None) -> None:
         self.index = index
         self.definition = definition
         self.check = check
+        self.suppress = suppress  # the compiled suppress_when
+        # No suppression and no counting window: evaluated inline by AlarmEngine.evaluate.
+        self.plain = definition.suppress_when is None and not isinstance(check, IncreaseCheck)
+        # A plain limit alarm that is normal stays normal while its tag is between its edges, a
+        # plain discrete one while its tag is none of its alarm values: the engine tests that
+        # inline, without calling the check (most alarms, most scans). fast: 1 limit, 2 discrete.
+        self.fast = 0
+        self.watched: Tag | None = None
+        self.low_edge, self.high_edge, self.alarm_values = math.inf, -math.inf, frozenset[object]()
+        if self.plain and isinstance(check, LimitCheck):
+            self.fast, self.watched, self.low_edge, self.high_edge = 1, check.tag, check.low_edge, check.high_edge
+        elif self.plain and isinstance(check, DiscreteCheck) and check.mode == "value":
+            self.fast, self.watched, self.alarm_values = 2, check.tag, frozenset(check.values)
         self.level = ""  # "" while the process is normal (after delays)
         self.active = False
         self.pending_due: float | None = None  # an on/off delay running until then (clock time)
@@ -102,13 +116,17 @@ class AlarmEngine:
         self.db = db
         self.clock = clock
         self._publish = publish
-        self.alarms = [Alarm(index, definition, make_check(definition, db)) for index, definition in enumerate(settings.definitions)]
+        self.alarms = [
+            Alarm(index, definition, make_check(definition, db),
+                  compile_condition(definition.suppress_when, db) if definition.suppress_when is not None else None)
+            for index, definition in enumerate(settings.definitions)
+        ]
         self.by_name = {alarm.name: alarm for alarm in self.alarms}
         index: dict[str, list[int]] = {}
         for alarm in self.alarms:
             for tag in alarm.definition.reads:
                 index.setdefault(tag, []).append(alarm.index)
-        self._index = {tag: tuple(alarms) for tag, alarms in index.items()}
+        self._index = {db[tag]: tuple(alarms) for tag, alarms in index.items()}
         self._dirty: set[int] = set(range(len(self.alarms)))  # the first boundary looks at every alarm
         self._timers: list[tuple[float, int, int, int, str]] = []
         self._order = itertools.count()
@@ -124,12 +142,8 @@ class AlarmEngine:
 
     def note_changed(self, tags: Sequence[Tag]) -> None:
         """A `db.on_change` callback: mark the alarms that read these tags."""
-        index = self._index
-        dirty = self._dirty
-        for tag in tags:
-            alarms = index.get(tag.name)
-            if alarms is not None:
-                dirty.update(alarms)
+        # Keyed by the Tag objects themselves (no name lookup per change), all in C: map, filter, update.
+        self._dirty.update(*filter(None, map(self._index.get, tags)))
 
     def next_due(self) -> float | None:
         """Clock time of the earliest pending timer (delays, shelving, windows), if any."""
@@ -152,21 +166,39 @@ class AlarmEngine:
             return
         self._dirty = set()
         alarms = self.alarms
+        evaluate = self._evaluate
         for index in dirty:
-            self._evaluate(alarms[index], now)
+            alarm = alarms[index]
+            fast = alarm.fast
+            if fast and not alarm.level and alarm.pending_due is None:
+                value = alarm.watched.value  # type: ignore[union-attr]
+                if fast == 1:
+                    if alarm.low_edge < value < alarm.high_edge:
+                        continue
+                elif value not in alarm.alarm_values:
+                    continue
+            if alarm.plain:  # no suppression, no window: the condition is where it was?
+                level = alarm.level
+                raw = alarm.check(level, now)
+                if raw == level and alarm.pending_due is None:
+                    continue
+                evaluate(alarm, now, raw)
+            else:
+                evaluate(alarm, now, None)
         self.evaluations += len(dirty)
 
-    def _evaluate(self, alarm: Alarm, now: float) -> None:
+    def _evaluate(self, alarm: Alarm, now: float, raw: str | None) -> None:
         definition = alarm.definition
-        if definition.suppress_when is not None:
+        if alarm.suppress is not None:
             try:
-                suppressed = definition.suppress_when.evaluate(self.db.value)
+                suppressed = bool(alarm.suppress())
             except (TypeError, ValueError, ArithmeticError):
                 suppressed = alarm.suppressed
             if suppressed != alarm.suppressed:
                 self._set_suppressed(alarm, suppressed)
         level = alarm.level
-        raw = alarm.check(level, now)
+        if raw is None:
+            raw = alarm.check(level, now)
         if isinstance(alarm.check, IncreaseCheck):
             due = alarm.check.next_change(now)
             if due is not None:

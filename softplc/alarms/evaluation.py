@@ -8,11 +8,13 @@ database): a limit alarm that stays normal costs two comparisons.
 
 from __future__ import annotations
 
+import ast
 from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 from softplc.alarms.settings import AlarmDefinition
+from softplc.expression import Condition
 from softplc.tagdb import TagDatabase
 from softplc.tags import Quality
 
@@ -75,21 +77,90 @@ class DiscreteCheck:
         return ON if holds else ""
 
 
-class ConditionCheck:
-    """An expression over tags (the language of `run --until`)."""
+def condition_check(definition: AlarmDefinition, db: TagDatabase) -> Check:
+    """An expression over tags (the language of `run --until`), compiled."""
+    condition = definition.condition
+    assert condition is not None
+    holds = compile_condition(condition, db, exact=False)
+    value_of = db.value
 
-    __slots__ = ("condition", "value_of")
-
-    def __init__(self, definition: AlarmDefinition, db: TagDatabase) -> None:
-        assert definition.condition is not None
-        self.condition = definition.condition
-        self.value_of = db.value
-
-    def __call__(self, level: str, now: float) -> str:
+    def check(level: str, now: float) -> str:
         try:
-            return ON if self.condition.evaluate(self.value_of) else ""
+            return ON if holds() else ""
+        except ZeroDivisionError:
+            try:
+                return ON if condition.evaluate(value_of) else ""  # makes it NaN, as run --until does
+            except (TypeError, ValueError, ArithmeticError):
+                return level
         except (TypeError, ValueError, ArithmeticError):  # e.g. a string compared with a number
             return level
+
+    return check
+
+
+class _Compiler(ast.NodeTransformer):
+    """Rewrites a checked condition: tag names read their Tag's value, and/or/not give booleans."""
+
+    def __init__(self) -> None:
+        self.tags: dict[str, str] = {}  # tag name → the lambda's parameter holding its Tag
+
+    def visit_Name(self, node: ast.Name) -> ast.AST:
+        if node.id in _CONSTANTS:
+            return ast.copy_location(ast.Constant(_CONSTANTS[node.id]), node)
+        return self._tag(node.id, node)
+
+    def visit_Attribute(self, node: ast.Attribute) -> ast.AST:
+        return self._tag(_dotted(node), node)  # a dotted tag name, e.g. _sys.plant.overruns
+
+    def visit_BoolOp(self, node: ast.BoolOp) -> ast.AST:
+        self.generic_visit(node)
+        return ast.copy_location(ast.Call(ast.Name("bool", ast.Load()), [node], []), node)
+
+    def _tag(self, name: str, node: ast.AST) -> ast.AST:
+        parameter = self.tags.setdefault(name, f"_tag{len(self.tags)}")
+        return ast.copy_location(ast.Attribute(ast.Name(parameter, ast.Load()), "value", ast.Load()), node)
+
+
+_CONSTANTS = {"true": True, "false": False, "True": True, "False": False}
+
+
+def _dotted(node: ast.AST) -> str:
+    if isinstance(node, ast.Attribute):
+        return _dotted(node.value) + "." + node.attr
+    assert isinstance(node, ast.Name)
+    return node.id
+
+
+def compile_condition(condition: Condition, db: TagDatabase, *, exact: bool = True) -> Callable[[], Any]:
+    """`condition` as a Python function of the tags' current values.
+
+    Safe to compile: `Condition` accepted the text only if it holds nothing but names, constants,
+    arithmetic, comparisons and and/or/not. With `exact`, a division by zero falls back to the
+    condition's own evaluation (which makes it NaN), so both give the same answer; without, the
+    function raises ZeroDivisionError and the caller falls back.
+    """
+    compiler = _Compiler()
+    body = compiler.visit(ast.parse(condition.text.strip(), mode="eval")).body
+    if isinstance(body, ast.Call) and isinstance(body.func, ast.Name) and body.func.id == "bool":
+        body = body.args[0]  # at the top, truthiness is all that counts
+    # lambda _tag0=<Tag>, _tag1=<Tag>: ... — each Tag a default argument, i.e. a fast local.
+    parameters = [ast.arg(parameter) for parameter in compiler.tags.values()]
+    defaults = [ast.Subscript(ast.Name("tags", ast.Load()), ast.Constant(name), ast.Load()) for name in compiler.tags]
+    arguments = ast.arguments(posonlyargs=[], args=parameters, kwonlyargs=[], kw_defaults=[], defaults=defaults)
+    code = compile(ast.fix_missing_locations(ast.Expression(ast.Lambda(arguments, body))), f"<alarm condition {condition.text!r}>", "eval")
+    scope = {"__builtins__": {}, "bool": bool, "tags": {name: db[name] for name in condition.names}}
+    compiled = eval(code, scope)  # noqa: S307 — makes the function of a checked expression, see the docstring
+    if not exact:
+        return compiled  # type: ignore[no-any-return]
+    value_of = db.value
+
+    def holds() -> Any:
+        try:
+            return compiled()
+        except ZeroDivisionError:
+            return condition.evaluate(value_of)
+
+    return holds
 
 
 class IncreaseCheck:
@@ -124,7 +195,7 @@ class IncreaseCheck:
 
 Check = Callable[[str, float], str]
 _CHECKS: dict[str, Callable[[AlarmDefinition, TagDatabase], Any]] = {
-    "limit": LimitCheck, "discrete": DiscreteCheck, "condition": ConditionCheck, "increase": IncreaseCheck,
+    "limit": LimitCheck, "discrete": DiscreteCheck, "condition": condition_check, "increase": IncreaseCheck,
 }
 
 
