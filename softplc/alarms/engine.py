@@ -35,6 +35,7 @@ log = logging.getLogger(__name__)
 
 _DELAY, _SHELVE, _WINDOW = "delay", "shelve", "window"
 _ACTIVE_STATES = frozenset({AlarmState.UNACKNOWLEDGED, AlarmState.ACKNOWLEDGED})
+_WAITING = frozenset(state for state in AlarmState if state.needs_acknowledgement)
 _SEVERER = {("hi", "hihi"), ("lo", "lolo")}  # (from, to) pairs that escalate on the same side
 
 
@@ -90,22 +91,34 @@ class Alarm:
 
     @property
     def state(self) -> AlarmState:
+        if not (self.out_of_service or self.suppressed or self.shelving is not None):
+            return self.annunciation  # the usual case, without a call
         return effective_state(self.annunciation, shelved=self.shelving is not None, suppressed=self.suppressed,
                                out_of_service=self.out_of_service)
 
     @property
     def priority(self) -> Priority:
-        for level in self.definition.levels:
-            if level.name == self.level:
-                return level.priority
+        if self.level and self.definition.levels:
+            for level in self.definition.levels:
+                if level.name == self.level:
+                    return level.priority
         return self.definition.priority
 
     @property
     def severity(self) -> int:
-        for level in self.definition.levels:
-            if level.name == self.level:
-                return level.severity
+        if self.level and self.definition.levels:
+            for level in self.definition.levels:
+                if level.name == self.level:
+                    return level.severity
         return self.definition.severity
+
+    @property
+    def limit(self) -> float | None:
+        if self.level and self.definition.levels:
+            for level in self.definition.levels:
+                if level.name == self.level:
+                    return level.limit
+        return None
 
 
 class AlarmEngine:
@@ -296,7 +309,7 @@ class AlarmEngine:
     def counted(self, alarm: Alarm) -> tuple[bool, bool, bool, int, AlarmState]:
         state = alarm.state
         active = state in _ACTIVE_STATES
-        return active, state.needs_acknowledgement, state is AlarmState.SHELVED, alarm.priority.rank if active else 0, state
+        return active, state in _WAITING, state is AlarmState.SHELVED, alarm.priority.rank if active else 0, state
 
     def recount(self, alarm: Alarm, before: tuple[bool, bool, bool, int, AlarmState]) -> None:
         after = self.counted(alarm)
@@ -324,8 +337,7 @@ class AlarmEngine:
     def _render(self, alarm: Alarm) -> None:
         definition = alarm.definition
         alarm.value = self._watched_value(alarm)
-        limit = next((level.limit for level in definition.levels if level.name == alarm.level), None)
-        fields = {"value": alarm.value, "limit": limit, "level": alarm.level, "name": alarm.name, "tag": definition.tag}
+        fields = {"value": alarm.value, "limit": alarm.limit, "level": alarm.level, "name": alarm.name, "tag": definition.tag}
         alarm.message = render(definition.message, self.db.value, fields)
 
     def emit(self, alarm: Alarm, transition: Transition, previous: AlarmState, origin: Origin | None = None, comment: str = "") -> None:
@@ -356,16 +368,15 @@ class AlarmEngine:
 
     def snapshot(self, alarm: Alarm) -> AlarmSnapshot:
         definition = alarm.definition
-        limit = next((level.limit for level in definition.levels if level.name == alarm.level), None)
         return AlarmSnapshot(
             name=alarm.name, kind=definition.kind, tag=definition.source, group=definition.group,
             description=definition.description, priority=alarm.priority, severity=alarm.severity, state=alarm.state,
             annunciation=alarm.annunciation, active=alarm.active, message=alarm.message or alarm.name, value=alarm.value,
-            level=alarm.level, limit=limit, latching=definition.latching, shelving=alarm.shelving,
+            level=alarm.level, limit=alarm.limit, latching=definition.latching, shelving=alarm.shelving,
             suppressed=alarm.suppressed, out_of_service=alarm.out_of_service, since=alarm.since,
             active_since=alarm.active_since, last_transition=alarm.last_transition, sequence=alarm.sequence,
             comment=alarm.comment, comment_user=alarm.comment_user, tags=definition.reads,
-            limits=tuple((level.name, level.limit) for level in definition.levels),
+            limits=definition.limits,
         )
 
     def snapshots(self, alarms: Iterable[Alarm] | None = None) -> list[AlarmSnapshot]:

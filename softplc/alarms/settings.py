@@ -83,6 +83,11 @@ class AlarmDefinition:
     suppress_when: Condition | None = None
     location: Location | None = None
 
+    @property
+    def limits(self) -> tuple[tuple[str, float], ...]:
+        """(level, limit) of each level of a limit alarm."""
+        return tuple((level.name, level.limit) for level in self.levels)
+
 
 @dataclass(frozen=True)
 class AlarmSettings:
