@@ -42,7 +42,8 @@ _SEVERER = {("hi", "hihi"), ("lo", "lolo")}  # (from, to) pairs that escalate on
 class Alarm:
     """One alarm's definition and mutable state (the engine's alone; adapters get snapshots)."""
 
-    __slots__ = ("index", "definition", "check", "suppress", "plain", "fast", "watched", "low_edge", "high_edge", "alarm_values", "level", "active", "pending_due", "delay_generation", "annunciation",
+    __slots__ = ("index", "definition", "check", "suppress", "plain", "fast", "watched", "low_edge", "high_edge", "alarm_values",
+                 "level", "active", "pending_due", "delay_generation", "annunciation",
                  "shelving", "shelve_generation", "suppressed", "out_of_service", "since", "active_since", "last_transition",
                  "sequence", "message", "value", "comment", "comment_user")
 

@@ -27,11 +27,11 @@ from typing import TYPE_CHECKING, Any
 
 from asyncua import Server, ua
 from asyncua.common import event_objects
-from asyncua.server.address_space import AttributeValue, NodeData
 
-from softplc.alarms.model import AlarmSnapshot, AlarmState, NothingToAcknowledge, NotShelved, ServiceUnchanged, ShelveKind, ShelvingTimeOutOfRange, UnknownAlarm
+from softplc.alarms.model import AlarmSnapshot, NothingToAcknowledge, NotShelved, ServiceUnchanged, ShelvingTimeOutOfRange, UnknownAlarm
 from softplc.events import Event
 from softplc.opcua.commands import call_command, current_origin, current_session_id, install_caller_context
+from softplc.opcua.condition_events import EventTypeId, attribute_value, fill, fix_types, link, make_node, new_event, parent_folder
 from softplc.tagdb import Origin
 
 if TYPE_CHECKING:
@@ -44,10 +44,6 @@ INTERNAL = Origin("opcua", role=None)
 _I = ua.ObjectIds
 _SERVER = ua.NodeId(_I.Server)
 _EVENT_CLASSES = {"limit": (event_objects.LimitAlarm, _I.LimitAlarmType), "discrete": (event_objects.OffNormalAlarm, _I.OffNormalAlarmType)}
-_SHELVING = {None: ("Unshelved", _I.ShelvedStateMachineType_Unshelved), ShelveKind.TIMED: ("TimedShelved", _I.ShelvedStateMachineType_TimedShelved),
-             ShelveKind.ONE_SHOT: ("OneShotShelved", _I.ShelvedStateMachineType_OneShotShelved)}
-_LEVEL_FIELDS = {"hihi": "HighHighLimit", "hi": "HighLimit", "lo": "LowLimit", "lolo": "LowLowLimit"}
-_LEVEL_TEXT = {"hihi": "HighHigh", "hi": "High", "lo": "Low", "lolo": "LowLow"}
 _REFUSALS = {NothingToAcknowledge: ua.StatusCodes.BadConditionBranchAlreadyAcked, NotShelved: ua.StatusCodes.BadConditionNotShelved,
              ShelvingTimeOutOfRange: ua.StatusCodes.BadShelvingTimeOutOfRange, UnknownAlarm: ua.StatusCodes.BadNodeIdUnknown}
 _CONDITION_METHODS = (_I.AcknowledgeableConditionType_Acknowledge, _I.AcknowledgeableConditionType_Confirm, _I.ConditionType_AddComment,
@@ -113,35 +109,35 @@ class AlarmConditions:
     def _build(self, snapshots: list[AlarmSnapshotView]) -> None:
         aspace = self.server.iserver.aspace
         objects = aspace[ua.NodeId(_I.ObjectsFolder)]
-        folder = _node(aspace, ua.NodeId(ALARMS_FOLDER, self.ns), ua.QualifiedName("Alarms", self.ns), "the plant's alarms (OPC UA conditions)")
-        folder.attributes[ua.AttributeIds.EventNotifier] = _value(0, ua.VariantType.Byte)
-        _link(objects, folder, _I.Organizes, ua.NodeId(_I.FolderType))
+        folder = make_node(aspace, ua.NodeId(ALARMS_FOLDER, self.ns), ua.QualifiedName("Alarms", self.ns), "the plant's alarms (OPC UA conditions)")
+        folder.attributes[ua.AttributeIds.EventNotifier] = attribute_value(0, ua.VariantType.Byte)
+        link(objects, folder, _I.Organizes, ua.NodeId(_I.FolderType))
         server = aspace[_SERVER]
         for snapshot in snapshots:
             source = ua.NodeId(snapshot.tag, self.ns)
             emitting = [_SERVER]
-            tag_folder = _parent(aspace, source)
+            tag_folder = parent_folder(aspace, source)
             if tag_folder is not None:
                 emitting.append(tag_folder)
                 if tag_folder not in self.notifiers:  # the tag's folder becomes an event notifier of the Server's
                     self.notifiers.append(tag_folder)
-                    aspace[tag_folder].attributes[ua.AttributeIds.EventNotifier] = _value(1, ua.VariantType.Byte)
-                    _link(server, aspace[tag_folder], _I.HasNotifier, None)
-                _link(aspace[tag_folder], aspace[source], _I.HasEventSource, None)
+                    aspace[tag_folder].attributes[ua.AttributeIds.EventNotifier] = attribute_value(1, ua.VariantType.Byte)
+                    link(server, aspace[tag_folder], _I.HasNotifier, None)
+                link(aspace[tag_folder], aspace[source], _I.HasEventSource, None)
             event_class, type_id = _EVENT_CLASSES.get(snapshot.kind, (event_objects.AlarmCondition, _I.AlarmConditionType))
             node_id = ua.NodeId(f"alarms.{snapshot.name}", self.ns)
-            node = _node(aspace, node_id, ua.QualifiedName(snapshot.name, self.ns), snapshot.description or snapshot.name)
-            _link(folder, node, _I.Organizes, ua.NodeId(type_id))
+            node = make_node(aspace, node_id, ua.QualifiedName(snapshot.name, self.ns), snapshot.description or snapshot.name)
+            link(folder, node, _I.Organizes, ua.NodeId(type_id))
             if source in aspace:
-                _link(aspace[source], node, _I.HasCondition, None)
+                link(aspace[source], node, _I.HasCondition, None)
             shelving_id = ua.NodeId(f"alarms.{snapshot.name}/ShelvingState", self.ns)
-            shelving = _node(aspace, shelving_id, ua.QualifiedName("ShelvingState", 0), "shelving of " + snapshot.name)
-            _link(node, shelving, _I.HasComponent, ua.NodeId(_I.ShelvedStateMachineType))
+            shelving = make_node(aspace, shelving_id, ua.QualifiedName("ShelvingState", 0), "shelving of " + snapshot.name)
+            link(node, shelving, _I.HasComponent, ua.NodeId(_I.ShelvedStateMachineType))
             for method in _CONDITION_METHODS:
-                _link(node, aspace[ua.NodeId(method)], _I.HasComponent, None, inverse=False)
+                link(node, aspace[ua.NodeId(method)], _I.HasComponent, None, inverse=False)
             for method in _SHELVING_METHODS:
-                _link(shelving, aspace[ua.NodeId(method)], _I.HasComponent, None, inverse=False)
-            event = _new_event(event_class, node_id, source, snapshot)
+                link(shelving, aspace[ua.NodeId(method)], _I.HasComponent, None, inverse=False)
+            event = new_event(event_class, node_id, source, snapshot)
             event.EventType = EventTypeId.of(aspace, type_id)
             condition = _Condition(snapshot.name, node_id, shelving_id, source, emitting, event)
             self.by_node[node_id] = self.by_node[shelving_id] = self.by_name[snapshot.name] = condition
@@ -167,7 +163,7 @@ class AlarmConditions:
         # Refresh start/end events, as asyncua makes them for its own (unused here) refresh.
         self._refresh_events = (event_objects.RefreshStartEvent(), event_objects.RefreshEndEvent())
         for event in self._refresh_events:
-            _fix_types(event)
+            fix_types(event)
             event.SourceNode, event.SourceName, event.Severity = _SERVER, "Server", 1
             event.Message = ua.LocalizedText("ConditionRefresh")
             event.LocalTime = ua.TimeZoneDataType()
@@ -194,7 +190,7 @@ class AlarmConditions:
         if condition is None:
             return
         snapshot: AlarmSnapshot = event.data["alarm"]
-        _fill(condition, snapshot, event, self.shelve_max)
+        fill(condition, snapshot, event, self.shelve_max)
         service = self.server.iserver.subscription_service
         for node in condition.emitting:
             condition.event.emitting_node = node
@@ -300,43 +296,6 @@ class AlarmConditions:
             await items.trigger_event(marker, monitored_item)
 
 
-class EventTypeId(ua.NodeId):
-    """An event's EventType that also equals its supertypes' NodeIds.
-
-    asyncua's event filter evaluates OfType as plain equality of EventType; Part 4 (7.7.3)
-    wants every subtype to match, so a client filtering OfType AcknowledgeableConditionType
-    (node-opcua's alarm monitoring, UaExpert) would get none of our LimitAlarmType events.
-    Only the filter compares EventTypes; everywhere else this is an ordinary NodeId.
-    """
-
-    __slots__ = ()
-    supertypes: dict[Any, frozenset[ua.NodeId]] = {}
-
-    def __eq__(self, other: object) -> bool:
-        if ua.NodeId.__eq__(self, other):
-            return True
-        return isinstance(other, ua.NodeId) and other in EventTypeId.supertypes.get(self.Identifier, frozenset())
-
-    def __ne__(self, other: object) -> bool:
-        return not self.__eq__(other)
-
-    __hash__ = ua.NodeId.__hash__
-
-    @classmethod
-    def of(cls, aspace: Any, type_id: int) -> EventTypeId:
-        """The EventType id of `type_id`, knowing its supertypes from the address space."""
-        found: set[ua.NodeId] = set()
-        current: ua.NodeId | None = ua.NodeId(type_id)
-        while current is not None and current in aspace:
-            parent = next((ref.NodeId for ref in aspace[current].references
-                           if not ref.IsForward and ref.ReferenceTypeId == ua.NodeId(_I.HasSubtype)), None)
-            if parent is not None:
-                found.add(ua.NodeId(parent.Identifier, parent.NamespaceIndex))
-            current = parent
-        cls.supertypes[type_id] = frozenset(found)
-        return cls(type_id)
-
-
 class AlarmSnapshotView:
     """The few fields of an `alarms.list` item the address space is built from."""
 
@@ -345,144 +304,6 @@ class AlarmSnapshotView:
         self.kind: str = item["kind"]
         self.tag: str = item["tag"]
         self.description: str = item.get("description", "")
-
-
-# -- event objects ------------------------------------------------------------------------------
-
-_EXTRA = {
-    "NodeId": ua.VariantType.NodeId,  # the ConditionId (selected with AttributeId NodeId on ConditionType)
-    "ShelvingState": ua.VariantType.LocalizedText, "ShelvingState/CurrentState": ua.VariantType.LocalizedText,
-    "ShelvingState/CurrentState/Id": ua.VariantType.NodeId, "ShelvingState/UnshelveTime": ua.VariantType.Double,
-}
-_TYPE_FIXES = {_I.UtcTime: ua.VariantType.DateTime, _I.Duration: ua.VariantType.Double, _I.AudioDataType: ua.VariantType.ByteString}
-
-
-def _new_event(event_class: type, node_id: ua.NodeId, source: ua.NodeId, snapshot: AlarmSnapshotView) -> Any:
-    event = event_class(sourcenode=source)
-    for name, variant_type in _EXTRA.items():
-        event.add_property(name, None, variant_type)
-    _fix_types(event)
-    event.NodeId = node_id
-    event.SourceName = snapshot.tag
-    event.ConditionName = snapshot.name
-    event.ConditionClassId = ua.NodeId(_I.ProcessConditionClassType)
-    event.ConditionClassName = ua.LocalizedText("Process")
-    event.BranchId = ua.NodeId()
-    event.InputNode = source
-    event.Quality = ua.StatusCode(ua.StatusCodes.Good)
-    event.LocalTime = ua.TimeZoneDataType()
-    return event
-
-
-def _fix_types(event: Any) -> None:
-    """asyncua declares UtcTime and Duration fields with a NodeId where a VariantType belongs."""
-    for name, data_type in list(event.data_types.items()):
-        if isinstance(data_type, ua.NodeId):
-            event.data_types[name] = _TYPE_FIXES.get(data_type.Identifier, ua.VariantType.Variant)
-
-
-def _fill(condition: _Condition, snapshot: AlarmSnapshot, event: Event, shelve_max: float) -> None:
-    """Update the condition's event object to the snapshot's state, with a new EventId."""
-    target = condition.event
-    data = event.data
-    now = datetime.now(timezone.utc)
-    stamp = datetime.fromtimestamp(event.time, timezone.utc)
-    event_id = uuid.uuid4().bytes
-    condition.event_ids.append(event_id)
-    state = snapshot.state
-    target.EventId = event_id
-    target.Time, target.ReceiveTime = stamp, now
-    target.Message = ua.LocalizedText(snapshot.message)
-    target.LastSeverity, target.Severity = condition.severity or snapshot.severity, snapshot.severity
-    condition.severity = snapshot.severity
-    condition.retained = target.Retain = state.annunciated or snapshot.active
-    target.ClientUserId = data.get("user", "")
-    target.Comment = ua.LocalizedText(snapshot.comment)
-    enabled = not snapshot.out_of_service
-    target.EnabledState, target.__dict__["EnabledState/Id"] = ua.LocalizedText("Enabled" if enabled else "Disabled"), enabled
-    level = _LEVEL_TEXT.get(snapshot.level, "")
-    active_text = ("Active " + level).strip() if snapshot.active else "Inactive"
-    _state(target, "ActiveState", snapshot.active, active_text, stamp)
-    target.__dict__["ActiveState/EffectiveDisplayName"] = ua.LocalizedText(active_text)
-    _state(target, "AckedState", snapshot.acknowledged, "Acknowledged" if snapshot.acknowledged else "Unacknowledged", stamp)
-    _state(target, "SuppressedState", snapshot.suppressed, "Suppressed" if snapshot.suppressed else "Unsuppressed", stamp)
-    _state(target, "OutOfServiceState", snapshot.out_of_service, "Out of Service" if snapshot.out_of_service else "In Service", stamp)
-    latched = state is AlarmState.LATCHED
-    _state(target, "LatchedState", latched, "Latched" if latched else "Unlatched", stamp)
-    shelving = snapshot.shelving
-    text, state_id = _SHELVING[shelving.kind if shelving is not None else None]
-    target.ShelvingState = target.__dict__["ShelvingState/CurrentState"] = ua.LocalizedText(text)
-    target.__dict__["ShelvingState/CurrentState/Id"] = ua.NodeId(state_id)
-    target.__dict__["ShelvingState/UnshelveTime"] = max(0.0, (shelving.until - event.time) * 1000.0) if shelving is not None else 0.0
-    target.SuppressedOrShelved = snapshot.suppressed or shelving is not None or snapshot.out_of_service
-    target.MaxTimeShelved = shelve_max * 1000.0
-    for level_name, limit in snapshot.limits:
-        if hasattr(target, _LEVEL_FIELDS[level_name]):
-            setattr(target, _LEVEL_FIELDS[level_name], float(limit))
-
-
-def _state(target: Any, name: str, value: bool, text: str, stamp: datetime) -> None:
-    fields = target.__dict__
-    previous = fields.get(f"{name}/Id")
-    setattr(target, name, ua.LocalizedText(text))
-    fields[f"{name}/Id"] = value
-    if previous is None or previous != value:
-        fields[f"{name}/TransitionTime"] = stamp
-
-
-# -- nodes ----------------------------------------------------------------------------------------
-
-
-def _value(value: Any, variant_type: ua.VariantType) -> AttributeValue:
-    return AttributeValue(ua.DataValue(ua.Variant(value, variant_type)))
-
-
-def _node(aspace: Any, node_id: ua.NodeId, browse_name: ua.QualifiedName, description: str) -> NodeData:
-    node = NodeData(node_id)
-    node.attributes = {
-        ua.AttributeIds.NodeId: _value(node_id, ua.VariantType.NodeId),
-        ua.AttributeIds.BrowseName: _value(browse_name, ua.VariantType.QualifiedName),
-        ua.AttributeIds.NodeClass: _value(ua.NodeClass.Object, ua.VariantType.Int32),
-        ua.AttributeIds.DisplayName: _value(ua.LocalizedText(browse_name.Name), ua.VariantType.LocalizedText),
-        ua.AttributeIds.Description: _value(ua.LocalizedText(description), ua.VariantType.LocalizedText),
-        ua.AttributeIds.WriteMask: _value(0, ua.VariantType.UInt32),
-        ua.AttributeIds.UserWriteMask: _value(0, ua.VariantType.UInt32),
-        ua.AttributeIds.EventNotifier: _value(0, ua.VariantType.Byte),
-    }
-    aspace[node_id] = node
-    return node
-
-
-def _attribute(node: NodeData, attribute: ua.AttributeIds) -> Any:
-    return node.attributes[attribute].value.Value.Value  # type: ignore[union-attr]
-
-
-def _link(parent: NodeData, child: NodeData, reference: int, type_definition: ua.NodeId | None, *, inverse: bool = True) -> None:
-    """Reference parent → child (and the inverse on the child unless it is a shared method); the child's type if new."""
-    node_class = _attribute(child, ua.AttributeIds.NodeClass)
-    parent.references.append(ua.ReferenceDescription(
-        ReferenceTypeId=ua.NodeId(reference), IsForward=True, NodeId=child.nodeid, BrowseName=_attribute(child, ua.AttributeIds.BrowseName),
-        DisplayName=_attribute(child, ua.AttributeIds.DisplayName), NodeClass=node_class, TypeDefinition=type_definition or ua.NodeId(),
-    ))
-    if inverse:
-        child.references.append(ua.ReferenceDescription(
-            ReferenceTypeId=ua.NodeId(reference), IsForward=False, NodeId=parent.nodeid, BrowseName=_attribute(parent, ua.AttributeIds.BrowseName),
-            DisplayName=_attribute(parent, ua.AttributeIds.DisplayName), NodeClass=_attribute(parent, ua.AttributeIds.NodeClass),
-        ))
-    if type_definition is not None:
-        child.references.append(ua.ReferenceDescription(
-            ReferenceTypeId=ua.NodeId(_I.HasTypeDefinition), IsForward=True, NodeId=type_definition, NodeClass=ua.NodeClass.ObjectType,
-        ))
-
-
-def _parent(aspace: Any, node_id: ua.NodeId) -> ua.NodeId | None:
-    """The folder that organizes a tag's Variable."""
-    if node_id not in aspace:
-        return None
-    for reference in aspace[node_id].references:
-        if not reference.IsForward and reference.ReferenceTypeId == ua.NodeId(_I.Organizes):
-            return reference.NodeId
-    return None
 
 
 def _values(arguments: tuple[ua.Variant, ...]) -> list[Any]:
