@@ -112,3 +112,40 @@ async def test_a_running_plant_journals_to_its_configured_backend(storage_settin
         await runtime.stop()
     # Committed: a reader that is not the runtime finds the rows.
     assert len(search(Database(storage_settings), JournalQuery(), "alarm-test")) == 2
+
+
+async def test_alarms_keep_working_while_the_journal_store_is_down_and_say_so(tmp_path: Path, caplog) -> None:
+    import socket
+
+    from softplc.commands import CommandRefused
+
+    with socket.socket() as probe:  # a loopback port nobody listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    path = tmp_path / "tagdb.yaml"
+    section = f'journal: {{backend: postgresql, dsn: "host=127.0.0.1 port={port} dbname=plant user=softplc connect_timeout=2"}}'
+    path.write_text(plant(section + "\ndefinitions:\n  - {name: level_hi, limit: {tag: level, hi: 90}}"))
+    config = load_config(path)
+    runtime = Runtime(config, RealClock(), state_dir=tmp_path / "state")
+    for adapter in build_adapters(config, None):
+        if adapter.name == "alarms":
+            runtime.add_adapter(adapter)
+    await runtime.start()
+    try:
+        assert "alarm journal: cannot open PostgreSQL" in caplog.text
+        runtime.db.submit([("level", 95.0)], DRIVER)
+        for _ in range(200):
+            if runtime.db.value("_sys.alarms.unacknowledged") == 1:
+                break
+            await asyncio.sleep(0.01)
+        assert await runtime.commands.call("alarms.acknowledge", {"alarm": "level_hi"}, PEOPLE["operator"]) == "acknowledged level_hi (now acknowledged)"
+        try:
+            await runtime.commands.call("alarms.journal", {}, PEOPLE["viewer"])
+        except CommandRefused as refused:
+            assert str(refused).startswith("the alarm journal cannot be read now:")
+        else:
+            raise AssertionError("the journal read did not fail")
+        adapter = next(adapter for adapter in runtime.adapters if adapter.name == "alarms")
+        assert adapter.journal.writer.stats.pending == 2  # kept for when the store is back
+    finally:
+        await runtime.stop()

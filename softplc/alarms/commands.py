@@ -31,6 +31,7 @@ from softplc.alarms.model import AlarmState, Priority
 from softplc.clock import Clock
 from softplc.commands import CommandRefused, Commands, Permission
 from softplc.durations import parse_duration
+from softplc.storage.database import driver_errors
 from softplc.tagdb import Origin
 
 STATE_FILTERS = ("all", "annunciated", "active", "unacknowledged", "shelved", "suppressed", "out_of_service", "normal")
@@ -103,7 +104,10 @@ def register_alarm_commands(commands: Commands, engine: AlarmEngine, actions: Al
         query = _journal_query(arguments)
         # Rows recorded a moment ago are still queued: commit them first, off the event loop.
         await clock.run_blocking(journal.flush, 10.0)
-        rows = await clock.run_blocking(journal.search, query)
+        try:
+            rows = await clock.run_blocking(journal.search, query)
+        except driver_errors() as error:  # the store is down (a PostgreSQL restart): say so, keep running
+            raise CommandRefused(f"the alarm journal cannot be read now: {str(error).strip() or type(error).__name__}") from None
         return [row.to_dict() for row in rows]
 
     table: list[tuple[str, Callable[..., Any], Permission, str, dict[str, str]]] = [
