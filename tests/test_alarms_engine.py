@@ -129,3 +129,14 @@ async def test_a_simulated_run_gives_the_same_alarm_history_every_time(tmp_path)
     assert first is not None and second is not None
     assert first.transitions() and first.transitions() == second.transitions()
     assert [event.data["alarm"].message for event in first.events] == [event.data["alarm"].message for event in second.events]
+
+
+async def test_a_plant_without_tasks_evaluates_its_alarms_every_100_ms(tmp_path) -> None:
+    head = """
+    version: 1
+    tags:
+      level: {type: float64}
+    """
+    text = plant("definitions:\n  - {name: level_hi, limit: {tag: level, hi: 90}, on_delay: 1s}", head=head)
+    run = await simulate(tmp_path, text, (write(1.05, "level", 95), write(3.05, "level", 10)), 5)
+    assert run.transitions() == [(2.1, "activated", "unacknowledged"), (3.1, "cleared", "returned")]

@@ -346,7 +346,8 @@ class AlarmEngine:
         alarm.sequence += 1
         alarm.last_transition = transition.value
         now = self.clock.wall()
-        alarm.since = now
+        if transition is not Transition.COMMENTED:  # a comment changes no state
+            alarm.since = now
         self.changed = True
         data = {
             "transition": transition.value,
