@@ -19,7 +19,7 @@ import logging
 import math
 from collections.abc import Callable, Iterable, Sequence
 
-from softplc.alarms.evaluation import Check, DiscreteCheck, IncreaseCheck, LimitCheck, compile_condition, make_check
+from softplc.alarms.evaluation import ON, Check, DiscreteCheck, IncreaseCheck, LimitCheck, compile_condition, make_check
 from softplc.alarms.messages import render
 from softplc.alarms.model import (
     AlarmSnapshot, AlarmState, Priority, Shelving, ShelveKind, Transition, Trigger, UnknownAlarm, effective_state, next_state, released_state,
@@ -42,7 +42,7 @@ _SEVERER = {("hi", "hihi"), ("lo", "lolo")}  # (from, to) pairs that escalate on
 class Alarm:
     """One alarm's definition and mutable state (the engine's alone; adapters get snapshots)."""
 
-    __slots__ = ("index", "definition", "check", "suppress", "plain", "fast", "watched", "low_edge", "high_edge", "alarm_values",
+    __slots__ = ("index", "definition", "check", "suppress", "plain", "fast", "watched", "low_edge", "high_edge", "alarm_values", "holds",
                  "level", "active", "pending_due", "delay_generation", "annunciation",
                  "shelving", "shelve_generation", "suppressed", "out_of_service", "since", "active_since", "last_transition",
                  "sequence", "message", "value", "comment", "comment_user")
@@ -56,14 +56,18 @@ class Alarm:
         self.plain = definition.suppress_when is None and not isinstance(check, IncreaseCheck)
         # A plain limit alarm that is normal stays normal while its tag is between its edges, a
         # plain discrete one while its tag is none of its alarm values: the engine tests that
-        # inline, without calling the check (most alarms, most scans). fast: 1 limit, 2 discrete.
+        # inline, without calling the check (most alarms, most scans). fast: 1 limit, 2 discrete,
+        # 3 a condition (its compiled expression called inline).
         self.fast = 0
+        self.holds: Callable[[], object] | None = getattr(check, "holds", None)
         self.watched: Tag | None = None
         self.low_edge, self.high_edge, self.alarm_values = math.inf, -math.inf, frozenset[object]()
         if self.plain and isinstance(check, LimitCheck):
             self.fast, self.watched, self.low_edge, self.high_edge = 1, check.tag, check.low_edge, check.high_edge
         elif self.plain and isinstance(check, DiscreteCheck) and check.mode == "value":
             self.fast, self.watched, self.alarm_values = 2, check.tag, frozenset(check.values)
+        elif self.plain and self.holds is not None:
+            self.fast = 3
         self.level = ""  # "" while the process is normal (after delays)
         self.active = False
         self.pending_due: float | None = None  # an on/off delay running until then (clock time)
@@ -184,6 +188,16 @@ class AlarmEngine:
         for index in dirty:
             alarm = alarms[index]
             fast = alarm.fast
+            if fast == 3:
+                level = alarm.level
+                try:
+                    raw = ON if alarm.holds() else ""  # type: ignore[misc]
+                except Exception:  # noqa: BLE001 — the check itself says what an error means
+                    raw = alarm.check(level, now)
+                if raw == level and alarm.pending_due is None:
+                    continue
+                evaluate(alarm, now, raw)
+                continue
             if fast and not alarm.level and alarm.pending_due is None:
                 value = alarm.watched.value  # type: ignore[union-attr]
                 if fast == 1:

@@ -95,6 +95,7 @@ def condition_check(definition: AlarmDefinition, db: TagDatabase) -> Check:
         except (TypeError, ValueError, ArithmeticError):  # e.g. a string compared with a number
             return level
 
+    check.holds = holds  # type: ignore[attr-defined]  # the engine calls it inline, the check on errors
     return check
 
 
