@@ -64,6 +64,7 @@ class RemoteCommands:
                                        security=self.security, timeout=self.timeout)
         except ValueError as error:
             raise RemoteError(str(error)) from None
+        client.session_timeout = 60_000  # what a softplc server grants; asyncua would warn about its 1 h ask
         try:
             await client.connect()
         except BadUserAccessDenied:
