@@ -33,6 +33,7 @@ SECTION_MODULES: tuple[str, ...] = (
     "softplc.modbus.section",
     "softplc.fleet.section",
     "softplc.history.section",
+    "softplc.alarms.section",
 )
 
 
