@@ -32,7 +32,8 @@ EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
 DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules that add subcommands (each defines add_commands(subparsers)).
-COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.commands", "softplc.scenarios.commands", "softplc.latency.command", "softplc.opcua.cli", "softplc.fleet.cli")
+COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.commands", "softplc.scenarios.commands", "softplc.latency.command", "softplc.opcua.cli", "softplc.fleet.cli",
+                                     "softplc.live.commands")
 
 log = logging.getLogger("softplc")
 
