@@ -6,6 +6,8 @@ apt_packages=()
 command -v mbpoll >/dev/null 2>&1 || apt_packages+=(mbpoll)
 # node-opcua (tests/node) needs Node.js >= 18 and npm.
 command -v npm >/dev/null 2>&1 || apt_packages+=(nodejs npm)
+# The storage tests (historian, alarm journal) start a real PostgreSQL server (tests/postgres_server.py).
+compgen -G "/usr/lib/postgresql/*/bin/initdb" >/dev/null || apt_packages+=(postgresql)
 if [ ${#apt_packages[@]} -gt 0 ]; then
   echo "installing system packages: ${apt_packages[*]}" >&2
   scripts/apt-install.sh "${apt_packages[@]}" \

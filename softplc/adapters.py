@@ -44,7 +44,8 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
     """
     from softplc.yamlsource import ConfigError, Problem
 
-    builders = [_fleet]  # robots are not servers: --no-servers keeps them
+    # Alarms first: the OPC UA server lists them (as conditions) when it starts.
+    builders = [_alarms, _fleet]  # alarms and robots are not servers: --no-servers keeps them
     if not (args is not None and getattr(args, "no_servers", False)):
         builders += [_opcua, _modbus]
     adapters: list[Adapter] = []
@@ -103,6 +104,16 @@ def _opcua(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter
     from softplc.opcua.server import OpcUaServer
 
     return [OpcUaServer(settings)]
+
+
+def _alarms(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    from softplc.alarms.settings import AlarmSettings, configured
+
+    if not configured(config):
+        return []
+    from softplc.alarms.adapter import AlarmsAdapter
+
+    return [AlarmsAdapter(AlarmSettings.from_config(config))]  # ConfigError: located problems of alarms:
 
 
 def _fleet(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:

@@ -233,7 +233,7 @@ class _Checker:
             path=self.path,
             name=plant.get("name", self.path.stem),
             description=plant.get("description", ""),
-            tags=list(self.tags.values()),
+            tags=list(self.tags.values()) + _contributed_tags(data),
             instances=self.instances,
             tasks=tasks,
             servers=data.get("servers") or {},
@@ -646,6 +646,19 @@ class _Checker:
     def _check_runtime(self, runtime: Any) -> None:
         if isinstance(runtime, dict) and "stall_after" in runtime:
             self._duration(runtime["stall_after"], ("runtime", "stall_after"), "stall_after")
+
+
+def _contributed_tags(data: dict[str, Any]) -> list[TagDef]:
+    """Tags other sections add to the plant: the alarm summary tags (`_sys.alarms.*`) with `alarms:`.
+
+    Marked stopgap: the configuration registry (branch `config`) takes such tag contributions
+    over at merge. They come last, so no other tag's Modbus address moves.
+    """
+    if isinstance(data.get("alarms"), dict):
+        from softplc.alarms.summary import summary_tag_definitions
+
+        return summary_tag_definitions()
+    return []
 
 
 def _is_name(text: str) -> bool:

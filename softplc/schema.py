@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from softplc.alarms.schema import alarms_schema  # alarms: (softplc.alarms; a section of the config registry at merge)
 from softplc.datatypes import TYPE_NAMES
 from softplc.durations import DURATION_REGEX
 
@@ -220,6 +221,7 @@ CONFIG_SCHEMA: dict[str, Any] = {
             "additionalProperties": False,
         },
         "fleet": FLEET,
+        "alarms": alarms_schema(DURATION),  # owned by softplc.alarms (docs/alarms.md)
         "runtime": {
             "type": "object",
             "properties": {

@@ -23,3 +23,48 @@ def make_config(tmp_path: Path) -> Callable[[str], PlantConfig]:
         return load_config(path)
 
     return make
+
+
+# -- storage backends (softplc.storage): SQLite, and a real PostgreSQL server ---------------------
+
+_schema_counter = iter(range(1, 1_000_000))
+
+
+@pytest.fixture(scope="session")
+def postgres_server():
+    """One PostgreSQL server for the session (initdb + pg_ctl on a free port), stopped at the end.
+
+    Skipped with the reason when the server binaries are missing, except under CI (CI=true),
+    where scripts/install-test-tools.sh must have installed them: there it fails.
+    """
+    import os
+
+    from tests.postgres_server import PostgresServer, PostgresUnavailable
+
+    try:
+        server = PostgresServer()
+    except PostgresUnavailable as error:
+        if os.environ.get("CI"):
+            raise
+        pytest.skip(str(error))
+    server.start()
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+@pytest.fixture
+def postgres_dsn(postgres_server) -> str:
+    """A DSN to a fresh, empty schema of the session's PostgreSQL server."""
+    return postgres_server.new_schema(f"test_{next(_schema_counter)}")
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def storage_settings(request, tmp_path: Path):
+    """StorageSettings for a fresh, empty store: once on SQLite, once on PostgreSQL."""
+    from softplc.storage import StorageSettings
+
+    if request.param == "sqlite":
+        return StorageSettings.sqlite(tmp_path / "store.sqlite", flush_period=0.05)
+    return StorageSettings.postgresql(request.getfixturevalue("postgres_dsn"), flush_period=0.05)

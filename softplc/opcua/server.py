@@ -33,6 +33,8 @@ from asyncua.common.callback import CallbackType
 from softplc import __version__
 from softplc.opcua.address_space import AddressSpaceBuilder, plan_folders, tag_node_id
 from softplc.opcua.browsing import MAX_CONTINUATION_POINTS
+from softplc.opcua.commands import CommandsDoor  # alarms branch: the door to runtime.commands
+from softplc.opcua.conditions import AlarmConditions  # alarms branch: Part 9 conditions
 from softplc.opcua.publisher import Publisher
 from softplc.opcua.roles import RolePermissions
 from softplc.opcua.scheduling import ScanGuard
@@ -67,6 +69,8 @@ class OpcUaServer:
         self.publisher: Publisher | None = None
         self.writes: TagAttributeService | None = None
         self.user_manager: SoftplcUserManager | None = None
+        self.conditions: AlarmConditions | None = None  # alarms branch
+        self.commands_door: CommandsDoor | None = None  # alarms branch
 
     @property
     def namespace_uri(self) -> str:
@@ -160,8 +164,13 @@ class OpcUaServer:
         self.namespace_index = await server.register_namespace(settings.namespace)
         await self._configure_security(server)
         await self._build_address_space(runtime)
+        # alarms branch: Alarms & Conditions (softplc/opcua/conditions.py), Objects/Commands (commands.py)
+        self.conditions = await AlarmConditions.install(server, runtime, self.namespace_index)
+        self.commands_door = await CommandsDoor.install(server, runtime.commands, self.namespace_index)
 
     async def stop(self) -> None:
+        if self.conditions is not None:  # alarms branch
+            await self.conditions.stop()
         if self.publisher is not None:
             await self.publisher.stop()
         if self.server is not None:

@@ -1,0 +1,38 @@
+"""Storage shared by the historian and the alarm journal: one backend choice, one batching writer.
+
+The contract (stable; the alarm journal builds on it):
+
+- `StorageSettings.from_section(section, state_dir, default_file)` reads the storage keys of a
+  YAML section (`backend: sqlite|postgresql`, `path`, `dsn`, `flush_period`);
+  `storage_problems(section, where, source)` lists their mistakes as located `Problem`s and
+  `STORAGE_PROPERTIES` is their JSON Schema fragment, to merge into a section's schema.
+- `Database(settings)` opens connections of the chosen backend (`connect()`), and writes SQL
+  with `?` placeholders that it adapts (`database.sql(text)`): SQLite in WAL mode, PostgreSQL
+  through psycopg 3.
+- `BatchWriter(database, flush_period=...)` is ONE thread that owns a write connection: each
+  `Sink` registered with it creates its tables (`prepare`), and receives the rows `put` for it
+  in one transaction per flush period (`write`), then `maintain`s itself (retention) now and then.
+  `put()` is cheap and thread-safe (call it on the event loop); `flush()` waits until what was
+  put is committed; `stop()` flushes and closes. A failed transaction keeps its rows for the
+  next flush (bounded by `max_pending`), so a PostgreSQL restart loses nothing.
+
+Tests get a real PostgreSQL server from the `postgres_dsn` fixture (tests/postgres_server.py)
+and both backends from `storage_database` (see tests/conftest.py).
+"""
+
+from softplc.storage.database import Backend, Database, StorageError
+from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, storage_problems
+from softplc.storage.writer import BatchWriter, Sink, WriterStats
+
+__all__ = [
+    "Backend",
+    "BatchWriter",
+    "Database",
+    "STORAGE_PROPERTIES",
+    "Sink",
+    "StorageError",
+    "StorageSettings",
+    "WriterStats",
+    "parse_span",
+    "storage_problems",
+]
