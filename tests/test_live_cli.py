@@ -165,20 +165,56 @@ async def test_bad_assignment_syntax_is_a_usage_error(tmp_path: Path) -> None:
     assert code == 2 and err.strip() == "softplc write: 'i16' is not TAG=VALUE (e.g. t01_iFr=45 or r01_status=true)"
 
 
-async def test_forces_lists_the_forced_tags(plant, tmp_path: Path) -> None:
+async def test_forces_lists_the_forced_tags_with_who_forced_them(plant, tmp_path: Path) -> None:
     runtime, server = plant
     code, out, err = await softplc("forces", "--endpoint", server.endpoint, home=tmp_path)
     assert (code, out.strip()) == (0, "no forced tags"), err
     await force(runtime, "b1", True)
     await force(runtime, "f32", "2.5")
-    since = runtime.db["f32"].timestamp
+    since = {f.tag: f.since for f in runtime.db.forces.active()}
     code, out, err = await softplc("forces", "--endpoint", server.endpoint, home=tmp_path)
     assert code == 0, err
     rows = table(out)
-    assert list(rows) == ["b1", "f32"]
-    assert rows["b1"][0] == "true" and rows["f32"][:2] == ["2.5", utc(since)]
+    assert rows == {"b1": ["true", utc(since["b1"]), "test:tester"], "f32": ["2.5", utc(since["f32"]), "test:tester"]}
     code, out, err = await softplc("forces", "--format", "json", "--endpoint", server.endpoint, home=tmp_path)
-    assert [(f["tag"], f["value"]) for f in json.loads(out)] == [("b1", True), ("f32", 2.5)]
+    assert [(f["tag"], f["value"], f["by"]) for f in json.loads(out)] == [("b1", True, "test:tester"), ("f32", 2.5, "test:tester")]
+
+
+async def test_forces_of_a_server_without_the_commands_door_come_from_good_local_override(plant, tmp_path: Path) -> None:
+    runtime, server = plant
+    await force(runtime, "i32", 42)
+    from asyncua import ua
+
+    await server.server.delete_nodes([server.server.get_node(ua.NodeId("Commands", server.namespace_index))], recursive=True)
+    code, out, err = await softplc("forces", "--endpoint", server.endpoint, home=tmp_path)
+    assert code == 0, err
+    assert table(out) == {"i32": ["42", utc(runtime.db["i32"].timestamp), "?"]}
+    assert out.splitlines()[-1] == "(this server has no OPC UA door to the runtime's commands: who forced a tag is not known here)"
+    code, _, err = await softplc("force", "i32=1", "--user", "engineer", "--endpoint", server.endpoint, password=PASSWORDS["engineer"], home=tmp_path)
+    assert code == 1 and "this server has no OPC UA door to the runtime's commands" in err
+
+
+async def test_an_engineer_forces_and_unforces_from_the_command_line(plant, tmp_path: Path) -> None:
+    runtime, server = plant
+    engineer = ("--user", "engineer", "--endpoint", server.endpoint)
+    code, out, err = await softplc("force", "request=7", "f32=2.5", *engineer, password=PASSWORDS["engineer"], home=tmp_path)
+    assert code == 0, err
+    assert out.splitlines() == ["request forced to 7 from the next cycle", "f32 forced to 2.5 from the next cycle"]
+    await wait_until(lambda: runtime.db["request"].forced and runtime.db.value("reply") == 7)  # the program reads the forced value
+    assert all(str(f.origin).startswith("opcua:engineer@127.0.0.1:") for f in runtime.db.forces.active())  # who, for the audit
+    # An operator may not force: refused by role, exit status 4.
+    code, out, err = await softplc("force", "i16=1", "--user", "operator", "--endpoint", server.endpoint, password=PASSWORDS["operator"], home=tmp_path)
+    assert code == 4 and out == ""
+    assert "tags.force: this session's role may not do that (BadUserAccessDenied)" in err and "engineer role" in err
+    assert not runtime.db["i16"].forced
+    # The runtime's refusals, in its words: a value of the wrong type, an unknown tag, a tag not forced.
+    code, _, err = await softplc("force", "i16=abc", *engineer, password=PASSWORDS["engineer"], home=tmp_path)
+    assert code == 1 and err.strip() == "softplc force: i16: type mismatch: expected int16, got 'abc'"
+    code, out, err = await softplc("unforce", "request", "i16", "f32", "--restore", *engineer, password=PASSWORDS["engineer"], home=tmp_path)
+    assert code == 1
+    assert out.splitlines() == ["request unforced and restored from the next cycle", "f32 unforced and restored from the next cycle"]
+    assert err.strip() == "softplc unforce: i16 is not forced"
+    await wait_until(lambda: not runtime.db.forces and runtime.db.value("f32") == 0.0)
 
 
 # -- logging in ------------------------------------------------------------------------------

@@ -1,13 +1,15 @@
-"""`softplc read | write | watch | forces`: look at and write a running plant from a terminal, over OPC UA.
+"""`softplc read | write | watch | forces | force | unforce`: a running plant from a terminal, over OPC UA.
 
 They log in with the options every OPC UA client command shares (softplc/opcua/login.py), so they
 work from another machine as well as this one. Exit statuses:
 
     0  done
-    1  refused by a tag's rule (unknown tag, type, range, read-only, forced), or a value that does not parse
+    1  refused by a tag's rule (unknown tag, type, range, read-only, forced), or a value that does not parse;
+       a command the runtime refused (e.g. unforce of a tag that is not forced)
     2  bad command line
     3  no connection: nothing answers at the endpoint, or the server went away (watch)
-    4  not allowed: the login was refused (user, password, certificate), or the session's role may not write
+    4  not allowed: the login was refused (user, password, certificate), or the session's role may not
+       write (a viewer) or force (anyone but an engineer)
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ EXAMPLES = "softplc read t01_iBL t01_qSL | softplc write t01_iFr=45 --user alice
 
 
 def add_commands(subparsers: Any) -> None:
-    """Register read, write, watch and forces with the softplc command line."""
+    """Register read, write, watch, forces, force and unforce with the softplc command line."""
     read = subparsers.add_parser(
         "read", help="read tags of a running plant (OPC UA)",
         description="Read the current value, quality, forced mark (F) and time of last change of each TAG "
@@ -67,12 +69,34 @@ def add_commands(subparsers: Any) -> None:
 
     forces = subparsers.add_parser(
         "forces", help="list the forced tags of a running plant (OPC UA)",
-        description="List every forced tag: its forced value and since when (forced tags carry the OPC UA "
-        "StatusCode GoodLocalOverride). Force and unforce with the HMI, or the tags.force command.",
+        description="List every forced tag: its forced value, since when and who forced it. Forced tags also "
+        "carry the OPC UA StatusCode GoodLocalOverride, and show F in read and watch.",
     )
     forces.add_argument("--format", choices=("table", "json"), default="table")
     add_login_arguments(forces)
     forces.set_defaults(func=cmd_forces)
+
+    force = subparsers.add_parser(
+        "force", help="force tags of a running plant (engineer role)",
+        description="Force each TAG to VALUE (parsed by the tag's type) from the next scan cycle: programs read "
+        "the forced value, their writes to the tag and clients' writes are refused or dropped, every protocol "
+        "shows it (CODESYS semantics, docs/runtime.md). Forces are not retained across a restart.",
+        epilog="Examples: softplc force t01_iFr=0 --user eng | softplc unforce t01_iFr --user eng",
+    )
+    force.add_argument("assignments", nargs="+", metavar="TAG=VALUE")
+    add_login_arguments(force)
+    force.set_defaults(func=cmd_force)
+
+    unforce = subparsers.add_parser(
+        "unforce", help="release forced tags of a running plant (engineer role)",
+        description="Release each forced TAG from the next scan cycle. It keeps the forced value until its "
+        "owner (a program, a driver, a client) writes it again; with --restore it goes back to the value it had "
+        "when it was forced.",
+    )
+    unforce.add_argument("tags", nargs="+", metavar="TAG")
+    unforce.add_argument("--restore", action="store_true", help="put back the value the tag had before the force")
+    add_login_arguments(unforce)
+    unforce.set_defaults(func=cmd_unforce)
 
 
 def _milliseconds(text: str) -> float:
@@ -185,10 +209,13 @@ def cmd_watch(args: argparse.Namespace) -> int:
 
 def cmd_forces(args: argparse.Namespace) -> int:
     async def body(live: LiveSession) -> int:
-        from softplc.live.forces import FORCES_HEADER, UNKNOWN_BY, list_forces
+        from softplc.live.forces import FORCES_HEADER, UNKNOWN_BY, CommandError, list_forces
         from softplc.live.table import format_time, format_value, table_lines
 
-        forced = await list_forces(live)
+        try:
+            forced = await list_forces(live)
+        except CommandError as error:
+            return _fail("forces", str(error), EXIT_NOT_ALLOWED if error.not_allowed else EXIT_REFUSED)
         if args.format == "json":
             rows = [{"tag": f.tag, "value": f.value, "since": f.since.isoformat() if f.since else None,
                      "by": None if f.by == UNKNOWN_BY else f.by} for f in forced]
@@ -200,7 +227,42 @@ def cmd_forces(args: argparse.Namespace) -> int:
         rows = [[f.tag, format_value(f.value, f.single), format_time(f.since), f.by] for f in forced]
         print("\n".join(table_lines(rows, FORCES_HEADER)))
         if any(f.by == UNKNOWN_BY for f in forced):
-            print(f"({len(forced)} forced; who forced them is not published over OPC UA by this server: see the HMI or the audit trail)")
+            print("(this server has no OPC UA door to the runtime's commands: who forced a tag is not known here)")
         return EXIT_OK
 
     return _run("forces", args, body)
+
+
+def cmd_force(args: argparse.Namespace) -> int:
+    from softplc.live.writing import parse_assignments
+
+    try:
+        assignments = parse_assignments(args.assignments)
+    except ValueError as error:
+        return _fail("force", str(error), EXIT_USAGE)
+    calls = [("tags.force", {"tag": a.tag, "value": a.text}) for a in assignments]
+    return _run("force", args, lambda live: _commands("force", live, calls))
+
+
+def cmd_unforce(args: argparse.Namespace) -> int:
+    calls = [("tags.unforce", {"tag": tag, "restore": args.restore}) for tag in args.tags]
+    return _run("unforce", args, lambda live: _commands("unforce", live, calls))
+
+
+async def _commands(command: str, live: LiveSession, calls: list[tuple[str, dict[str, Any]]]) -> int:
+    """Call runtime commands one by one, printing what each did or why it was refused."""
+    from softplc.live.forces import CommandError, call_command
+
+    status = EXIT_OK
+    for name, arguments in calls:
+        try:
+            print(await call_command(live, name, arguments))
+        except CommandError as error:
+            print(f"softplc {command}: {error}", file=sys.stderr)
+            if error.no_door:
+                return EXIT_REFUSED
+            status = max(status, EXIT_NOT_ALLOWED if error.not_allowed else EXIT_REFUSED)
+            if error.not_allowed:
+                print(f"softplc {command}: forcing needs the engineer role: log in with --user NAME as an engineer", file=sys.stderr)
+                return status
+    return status
