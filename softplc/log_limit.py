@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import re
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -63,14 +64,19 @@ class FloodFilter(logging.Filter):
         self.unlimited_below = unlimited_below
         self._now = now
         self._windows: dict[tuple[str, str | None], _Window] = {}  # (logger, kind); kind None: the whole logger
+        self._lock = threading.RLock()  # re-entrant: a summary is handed to the handler while it is held
         self._next_close = float("inf")
 
     def filter(self, record: logging.LogRecord) -> bool:
         if record.levelno < self.unlimited_below or getattr(record, SUMMARY_ATTRIBUTE, False):
             return True
+        with self._lock:  # the stall detector logs from its own thread
+            return self._limit(record)
+
+    def _limit(self, record: logging.LogRecord) -> bool:
         now = self._now()
         if now >= self._next_close:
-            self.close_windows(now)
+            self._close_windows(now)
         kind = self._window((record.name, kind_of(record)), now)
         everything = self._window((record.name, None), now)
         if kind.written >= self.burst:
@@ -85,7 +91,7 @@ class FloodFilter(logging.Filter):
         window = self._windows.get(key)
         if window is None:
             if len(self._windows) >= MAX_KINDS:
-                self.close_windows(float("inf"))
+                self._close_windows(float("inf"))
             window = self._windows[key] = _Window(now)
             self._next_close = min(self._next_close, now + self.interval)
         return window
@@ -100,7 +106,10 @@ class FloodFilter(logging.Filter):
 
     def close_windows(self, now: float | None = None) -> None:
         """Close every window older than the interval (all of them for `now=inf`), summarising what each left out."""
-        now = self._now() if now is None else now
+        with self._lock:
+            self._close_windows(self._now() if now is None else now)
+
+    def _close_windows(self, now: float) -> None:
         closing = [key for key, window in self._windows.items() if now - window.start >= self.interval]
         for key in closing:
             window = self._windows.pop(key)

@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # asyncua is imported when a command runs: `softplc --help` m
     from softplc.live.session import LiveSession
 
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
+_LOGIN_STATUS = {"connect": EXIT_NO_CONNECTION, "refused": EXIT_NOT_ALLOWED, "usage": EXIT_USAGE}
 EXAMPLES = "softplc read t01_iBL t01_qSL | softplc write t01_iFr=45 --user alice | softplc watch 't01_*' 'r0?_xpos'"
 
 
@@ -123,7 +124,7 @@ def _run(command: str, args: argparse.Namespace, body: Callable[[LiveSession], A
     try:
         login = login_from_args(args)
     except LoginError as error:
-        return _fail(command, str(error), EXIT_USAGE if "--password-stdin needs" in str(error) else EXIT_NOT_ALLOWED)
+        return _fail(command, str(error), _LOGIN_STATUS[error.kind])
 
     async def session() -> int:
         from softplc.live.session import LiveSession, NotSoftplc, UnknownTags
@@ -147,7 +148,7 @@ def _run(command: str, args: argparse.Namespace, body: Callable[[LiveSession], A
     try:
         return asyncio.run(session())
     except LoginError as error:
-        return _fail(command, str(error), EXIT_NOT_ALLOWED if error.kind == "refused" else EXIT_NO_CONNECTION)
+        return _fail(command, str(error), _LOGIN_STATUS[error.kind])
     except (OSError, asyncio.TimeoutError, ConnectionError) as error:
         return _fail(command, f"lost the connection to {login.endpoint}: {error or type(error).__name__}", EXIT_NO_CONNECTION)
 

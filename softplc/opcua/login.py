@@ -39,7 +39,8 @@ CLIENT_NAME = "softplc-client"
 
 
 class LoginError(Exception):
-    """No session: `kind` is "connect" (no server there, a timeout) or "refused" (login, certificate, policy)."""
+    """No session: `kind` is "connect" (no server there, a timeout), "refused" (login, certificate, policy)
+    or "usage" (options that contradict each other)."""
 
     def __init__(self, message: str, kind: str = "connect") -> None:
         super().__init__(message)
@@ -152,7 +153,7 @@ def read_password(args: argparse.Namespace, stdin: TextIO | None = None) -> str 
     """The password for --user: from stdin (--password-stdin), the environment, or a prompt; None without --user."""
     if not getattr(args, "user", None):
         if getattr(args, "password_stdin", False):
-            raise LoginError("--password-stdin needs --user NAME", "refused")
+            raise LoginError("--password-stdin needs --user NAME", "usage")
         return None
     stdin = stdin or sys.stdin
     env_name = getattr(args, "password_env", PASSWORD_ENV)
