@@ -155,7 +155,12 @@ async def test_watch_says_when_the_server_goes_away(tmp_path: Path) -> None:
         first = await asyncio.wait_for(process.stdout.readline(), 30)  # subscribed: the first value arrived
         assert first.decode().split("  ")[1:] == ["i16 = 0", "good\n"]  # piped: one line per change
     # The runtime has stopped (and its server with it).
-    code = await asyncio.wait_for(process.wait(), 30)
+    try:
+        code = await asyncio.wait_for(process.wait(), 30)
+    finally:
+        if process.returncode is None:  # it did not notice: do not leave it running
+            process.kill()
+            await process.wait()
     err = (await process.stderr.read()).decode()
     assert code == 3
     assert re.fullmatch(r"softplc watch: the server went away \(.+\)\n", err), err
