@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from softplc import __version__
+from softplc import __version__, logs
 from softplc.clock import RealClock, SimClock
 from softplc.config import PlantConfig, load_config
 from softplc.console import print_table
@@ -38,7 +38,7 @@ DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules that add subcommands (each defines add_commands(subparsers)).
 COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.commands", "softplc.scenarios.commands", "softplc.latency.command", "softplc.opcua.cli", "softplc.fleet.cli",
-                                   "softplc.history.export", "softplc.alarms.cli")
+                                   "softplc.history.export", "softplc.alarms.cli", "softplc.live.commands")
 
 log = logging.getLogger("softplc")
 
@@ -47,7 +47,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
-        _configure_logging(args.verbose - args.quiet)
+        try:
+            logs.configure(logs.options_from_args(args))
+        except logs.LogFileError as error:
+            print(f"softplc: {error}", file=sys.stderr)
+            return EXIT_FAILURE
         if not hasattr(args, "func"):
             parser.print_help()
             return EXIT_FAILURE
@@ -60,6 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # e.g. `softplc tags | head`
         sys.stderr.close()
         return EXIT_OK
+    finally:
+        logs.flush_summaries()
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -70,8 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Start with: softplc check, then softplc run. Each command has --help.",
     )
     parser.add_argument("--version", action="version", version=f"softplc {__version__}")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
-    parser.add_argument("-q", "--quiet", action="count", default=0, help="less log output")
+    logs.add_log_arguments(parser)
     commands = parser.add_subparsers(title="commands", metavar="COMMAND")
 
     run = commands.add_parser(
@@ -130,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     for module_name in COMMAND_MODULES:
         importlib.import_module(module_name).add_commands(commands)
+    logs.add_log_arguments_to_commands(parser)
     return parser
 
 
@@ -141,14 +147,6 @@ def _positive_number(text: str) -> float:
     if not math.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive number, not {text}")
     return value
-
-
-def _configure_logging(verbosity: int) -> None:
-    level = logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG
-    logging.basicConfig(level=level, format="softplc: %(levelname)s: %(message)s", stream=sys.stderr, force=True)
-    if verbosity < 2:
-        for noisy in ("asyncua", "pymodbus"):
-            logging.getLogger(noisy).setLevel(logging.WARNING)
 
 
 def _print_problems(error: ConfigError, stream: TextIO | None = None) -> None:
@@ -263,6 +261,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             print(f"softplc: --rt-priority: {error}", file=sys.stderr)
             return EXIT_FAILURE
     clock = SimClock(speed=args.speed) if args.sim else RealClock()
+    logs.use_clock(clock)  # log timestamps in simulated time under --sim
     # A simulated run starts from the initial values and leaves the retained ones alone, so
     # it gives the same result every time and never disturbs the real plant's state.
     runtime = Runtime(config, clock, state_dir=args.state_dir, retain=not args.sim, corrupt_retain=args.corrupt_retain)

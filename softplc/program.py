@@ -110,6 +110,11 @@ class ProgramContext:
     params: dict[str, Any]
 
 
+def program_log(name: str) -> logging.Logger:
+    """The logger of program instance NAME: its own lines, its faults and restarts."""
+    return logging.getLogger(f"softplc.program.{name}")
+
+
 class Program:
     """Base class of scan programs. Override `scan()`; optionally `setup()`."""
 
@@ -132,7 +137,7 @@ class Program:
     def __init__(self, context: ProgramContext) -> None:
         self.name = context.name
         self.clock = context.clock
-        self.log = logging.getLogger(f"softplc.program.{context.name}")
+        self.log = program_log(context.name)
         for name, param in self.params.items():
             setattr(self, name, context.params.get(name, param.default))
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import asyncio
 import enum
-import logging
 import math
 import time
 import traceback
@@ -23,11 +22,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from softplc.clock import Clock
-from softplc.program import Direction, Program
+from softplc.log_format import BRIEF_TRACEBACK
+from softplc.program import Direction, Program, program_log
 from softplc.stats import TimingSeries
 from softplc.tagdb import Rule, TagDatabase, WriteRejected
-
-log = logging.getLogger(__name__)
 
 
 class ProgramState(enum.Enum):
@@ -97,7 +95,10 @@ class ProgramInstance:
             self.error = f"{type(error).__name__}: {error}{where}"
         else:
             self.error = error
-        log.error("program %s FAULTED: %s", self.name, self.error)
+        # Under the program's own logger; the traceback is shown with -v (softplc.log_format).
+        program_log(self.name).error("program %s FAULTED: %s", self.name, self.error,
+                                     exc_info=error if isinstance(error, BaseException) else None,
+                                     extra={BRIEF_TRACEBACK: True})
         if self.restart.on_fault == "restart" and self.restarts < self.restart.max_restarts:
             self._retry_at = now + self.restart.delay
         else:
@@ -118,7 +119,7 @@ class ProgramInstance:
     def maybe_restart(self, now: float) -> None:
         if self.restart_due(now):
             self.restarts += 1
-            log.warning("restarting program %s (restart %d of %d)", self.name, self.restarts, self.restart.max_restarts)
+            program_log(self.name).warning("restarting program %s (restart %d of %d)", self.name, self.restarts, self.restart.max_restarts)
             self.state = ProgramState.RUNNING
             self._retry_at = math.inf
             self.start(now)  # a setup that fails again waits the full delay before the next try

@@ -7,7 +7,6 @@ does so itself; another server needs it copied to its trust list).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 from asyncua import ua
@@ -16,41 +15,14 @@ from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
+# --security MODE[,CERT,KEY] is every client command's (softplc/opcua/login.py): the same here.
+from softplc.opcua.login import Security
+from softplc.opcua.login import application_uri as _application_uri
+
 MODES = {"None": ua.MessageSecurityMode.None_, "Sign": ua.MessageSecurityMode.Sign,
          "SignAndEncrypt": ua.MessageSecurityMode.SignAndEncrypt}
 APPLICATION_URI = "urn:softplc:latency-client"
-
-
-@dataclass(frozen=True)
-class Security:
-    """A parsed --security: the mode and, for Sign/SignAndEncrypt, the client certificate."""
-
-    mode: str
-    certificate: Path | None = None
-    key: Path | None = None
-
-    @property
-    def secured(self) -> bool:
-        return self.mode != "None"
-
-    def text(self) -> str:
-        if not self.secured:
-            return "None"
-        return f"{self.mode},{self.certificate},{self.key}"
-
-    @classmethod
-    def parse(cls, text: str) -> Security:
-        parts = [part.strip() for part in text.split(",")]
-        mode = {name.lower(): name for name in MODES}.get(parts[0].lower().removeprefix("basic256sha256_"))
-        if mode is None or len(parts) not in (1, 3):
-            raise ValueError(f"bad --security {text!r}; write None, Sign or SignAndEncrypt, optionally followed by ,CERT,KEY")
-        if len(parts) == 3:
-            certificate, key = Path(parts[1]), Path(parts[2])
-            for path in (certificate, key):
-                if not path.is_file():
-                    raise ValueError(f"--security: no such file {path}")
-            return cls(mode, certificate, key)
-        return cls(mode)
+__all__ = ["APPLICATION_URI", "MODES", "Security", "application_uri", "make_client_certificate"]
 
 
 def make_client_certificate(directory: Path) -> tuple[Path, Path]:
@@ -71,11 +43,4 @@ def make_client_certificate(directory: Path) -> tuple[Path, Path]:
 
 def application_uri(certificate: Path) -> str:
     """The application URI in a certificate's subjectAltName (asyncua must announce the same)."""
-    data = certificate.read_bytes()
-    loaded = x509.load_der_x509_certificate(data) if not data.startswith(b"-----") else x509.load_pem_x509_certificate(data)
-    try:
-        names = loaded.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
-    except x509.ExtensionNotFound:
-        return APPLICATION_URI
-    uris = names.get_values_for_type(x509.UniformResourceIdentifier)
-    return uris[0] if uris else APPLICATION_URI
+    return _application_uri(certificate, APPLICATION_URI)

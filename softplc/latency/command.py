@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from softplc.latency.plant import SCENARIO_NAMES, PlantMissing, scenario_durations
+from softplc.opcua.login import LoginError, add_login_arguments, read_password
 
 if TYPE_CHECKING:
     from softplc.latency.results import Measurement
@@ -73,12 +74,14 @@ def add_commands(commands: argparse._SubParsersAction) -> None:  # type: ignore[
                         "(roles: ready, task_id, delay, delay_scans, handshakes, ready_stamp; ROLE= drops one)")
     parser.add_argument("--namespace", metavar="URI", help="OPC UA namespace URI for {ns} in node ids "
                         "(default: urn:softplc:tags if the server has it, else the server's last)")
-    parser.add_argument("--security", metavar="MODE[,CERT,KEY]",
-                        help="OPC UA security: None, Sign or SignAndEncrypt (Basic256Sha256), optionally with the client "
-                        "certificate and key files; without them one is made (our runtime trusts it itself; another server "
-                        "must trust ~/.softplc/latency-client/latency-client.der)")
-    parser.add_argument("--user", help="OPC UA user name (password from $SOFTPLC_LATENCY_PASSWORD); a softplc lets anonymous "
-                        "sessions only read: add an operator with `softplc users add NAME --role operator --config CONFIG`")
+    # The login options every OPC UA client command shares (--endpoint and --timeout are latency's own).
+    add_login_arguments(
+        parser, endpoint=False, timeout=False, password_env="SOFTPLC_LATENCY_PASSWORD",
+        user_help="; add an operator with `softplc users add NAME --role operator --config CONFIG`",
+        security_help="OPC UA security: None, Sign or SignAndEncrypt (Basic256Sha256), optionally with the client "
+        "certificate and key files; without them one is made (our runtime trusts it itself; another server "
+        "must trust ~/.softplc/latency-client/latency-client.der)",
+    )
     parser.add_argument("--unit-id", type=number(int, low=0, high=255), default=1, help="Modbus unit id (default 1)")
     parser.add_argument("--word-order", choices=("big", "little"), default="big", help="Modbus word order of 32/64-bit values")
     parser.add_argument("--timeout", type=number(float, low=0, inclusive=False, unit=" s"), metavar="S",
@@ -108,12 +111,9 @@ def targets(args: argparse.Namespace) -> list[Target]:
     _check_tags(args.tag, protocols)
     if args.protocol == "modbus" and args.client == "subscription":
         raise ValueError("Modbus has no subscriptions: leave out --client or use --client poll")
-    if args.security:
-        from softplc.latency.certificate import Security
-
-        if "opcua" not in protocols:
-            raise ValueError("--security is for OPC UA")
-        Security.parse(args.security)  # raises ValueError with the reason
+    if args.security and "opcua" not in protocols:
+        raise ValueError("--security is for OPC UA")
+    security = args.security.text() if args.security else None  # checked by argparse already
     scenarios = list(SCENARIO_NAMES) if args.scenario == "all" else [args.scenario]
     if args.timeout is not None:
         for scenario in scenarios:
@@ -122,6 +122,10 @@ def targets(args: argparse.Namespace) -> list[Target]:
                 raise ValueError(f"--timeout {args.timeout:g} s is not longer than the {scenario} scenario's longest task "
                                  f"({longest:g} s): a Ready comes only after it (default: {longest + 1:g} s)")
     samples = args.samples if args.samples is not None or args.duration is not None else 100
+    try:
+        password = read_password(args)
+    except LoginError as error:
+        raise ValueError(str(error)) from None
     result = []
     for scenario in scenarios:
         for protocol in protocols:
@@ -129,7 +133,7 @@ def targets(args: argparse.Namespace) -> list[Target]:
                 protocol=protocol, scenario=scenario, scan=args.scan / 1000.0,
                 client_mode=None if protocol == "modbus" else args.client,
                 endpoint=args.endpoint, samples=samples, duration=args.duration, tags=list(args.tag),
-                namespace=args.namespace, security=args.security, user=args.user, password=_password(args),
+                namespace=args.namespace, security=security, user=args.user, password=password,
                 unit_id=args.unit_id, word_order=args.word_order, poll_interval_ms=args.poll_interval,
                 publishing_interval_ms=args.publishing_interval, timeout=args.timeout, loop=args.loop,
             ))
@@ -153,12 +157,6 @@ def _check_tags(items: list[str], protocols: list[str]) -> None:
     for role in ("ready", "task_id"):
         if role in tags and not tags[role]:
             raise ValueError(f"--tag {role}= cannot drop {role}: the handshake needs it")
-
-
-def _password(args: argparse.Namespace) -> str | None:
-    import os
-
-    return os.environ.get("SOFTPLC_LATENCY_PASSWORD") if args.user else None
 
 
 def cmd_latency(args: argparse.Namespace) -> int:

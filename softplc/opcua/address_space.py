@@ -233,7 +233,7 @@ class AddressSpaceBuilder:
 
     def _add_variable(self, definition: TagDef, parent: NodeData, tag: Tag) -> None:
         node = self._base_node(ua.NodeId(definition.name, self.ns), definition.name, definition.description, ua.NodeClass.Variable)
-        value = AttributeValue(data_value(definition, tag.value, tag.quality, tag.timestamp))
+        value = AttributeValue(data_value(definition, tag.value, tag.quality, tag.timestamp, tag.forced))
         self._variable_attributes(node, value, DATA_TYPE_IDS[definition.type], READ_WRITE if definition.access is Access.RW else READ)
         numeric = definition.type.is_numeric
         has_range = numeric and (definition.min is not None or definition.max is not None)

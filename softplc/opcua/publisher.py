@@ -104,7 +104,7 @@ class Publisher:
             await self.guard.clear()
             slice_end = time.perf_counter() + self.slice_seconds
             for count, (name, tag) in enumerate(batch.items(), 1):
-                dv = tag_data_value(tag.value, variant_types[name], tag.quality, tag.timestamp)
+                dv = tag_data_value(tag.value, variant_types[name], tag.quality, tag.timestamp, tag.forced)
                 await write(node_ids[name], _VALUE, dv)
                 if count & 3 == 0 and time.perf_counter() > slice_end:
                     await asyncio.sleep(0)

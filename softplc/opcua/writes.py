@@ -13,6 +13,7 @@ session's Write goes through) by `TagAttributeService`, which answers each item 
     BadTypeMismatch           wrong type (see `variants.value_from_variant` for the lossless
                               conversions accepted)
     BadOutOfRange             outside the tag's min/max, or outside its type's range
+    BadLocked                 the tag is forced (softplc/forcing.py): unforce it first
     BadWriteNotSupported      a StatusCode other than Good (clients cannot set quality)
     BadIndexRangeInvalid      an IndexRange (tags are scalars)
 
@@ -69,6 +70,7 @@ _RULE_CODES = {
     Rule.TYPE_MISMATCH: ua.StatusCodes.BadTypeMismatch,
     Rule.OUT_OF_RANGE: ua.StatusCodes.BadOutOfRange,
     Rule.ACCESS_DENIED: ua.StatusCodes.BadUserAccessDenied,
+    Rule.FORCED: ua.StatusCodes.BadLocked,  # "locked by a different application": an engineer's force
 }
 _CODE_RULES = {
     ua.StatusCodes.BadTypeMismatch: Rule.TYPE_MISMATCH,

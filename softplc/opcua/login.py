@@ -1,0 +1,265 @@
+"""How a softplc command logs in to an OPC UA server: one option set and one helper for every client command.
+
+    softplc read t01_iBL --endpoint opc.tcp://plc7:4840/softplc/ --user alice --security SignAndEncrypt
+    echo "$PASSWORD" | softplc write t01_iFr=45 --user alice --password-stdin
+    SOFTPLC_PASSWORD=... softplc watch 't01_*' --user alice
+
+- `--endpoint URL` (default: a softplc on this machine, `opc.tcp://127.0.0.1:4840/softplc/`);
+- `--user NAME`, the password from `--password-stdin` (the first line of stdin), else the
+  environment (`$SOFTPLC_PASSWORD`; `softplc latency`: `$SOFTPLC_LATENCY_PASSWORD`), else a
+  prompt when stdin is a terminal — never on the command line, where `ps` shows it; without
+  `--user` the session is anonymous (on a softplc: read only);
+- `--security MODE[,CERT,KEY]`: None, Sign or SignAndEncrypt (Basic256Sha256) with the client
+  certificate (DER or PEM) and its key; without CERT,KEY a certificate is made once in
+  `~/.softplc/client/` and kept — the server must trust it (`softplc opcua trust FINGERPRINT`).
+
+`connect()` turns every way a connection or login fails into a `LoginError` whose message says
+what to do, and whose `kind` tells the command's exit status (cannot connect / refused).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import getpass
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
+
+if TYPE_CHECKING:  # asyncua is imported by connect() only: `softplc --help` must not load it
+    from asyncua import Client
+
+DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/softplc/"
+PASSWORD_ENV = "SOFTPLC_PASSWORD"
+MODE_NAMES = ("None", "Sign", "SignAndEncrypt")
+DEFAULT_CERTIFICATE_DIR = Path.home() / ".softplc" / "client"
+CLIENT_NAME = "softplc-client"
+
+
+class LoginError(Exception):
+    """No session: `kind` is "connect" (no server there, a timeout), "refused" (login, certificate, policy)
+    or "usage" (options that contradict each other)."""
+
+    def __init__(self, message: str, kind: str = "connect") -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+@dataclass(frozen=True)
+class Security:
+    """A parsed --security: the mode and, for Sign/SignAndEncrypt, the client certificate and key."""
+
+    mode: str
+    certificate: Path | None = None
+    key: Path | None = None
+
+    @property
+    def secured(self) -> bool:
+        return self.mode != "None"
+
+    def text(self) -> str:
+        if not self.secured:
+            return "None"
+        return f"{self.mode},{self.certificate},{self.key}"
+
+    @classmethod
+    def parse(cls, text: str) -> Security:
+        """Parse MODE[,CERT,KEY] (MODE also as Basic256Sha256_MODE); raises ValueError with the reason."""
+        parts = [part.strip() for part in text.split(",")]
+        mode = {name.lower(): name for name in MODE_NAMES}.get(parts[0].lower().removeprefix("basic256sha256_"))
+        if mode is None or len(parts) not in (1, 3):
+            raise ValueError(f"bad --security {text!r}; write None, Sign or SignAndEncrypt, optionally followed by ,CERT,KEY")
+        if len(parts) == 3:
+            certificate, key = Path(parts[1]), Path(parts[2])
+            for path in (certificate, key):
+                if not path.is_file():
+                    raise ValueError(f"--security: no such file {path}")
+            return cls(mode, certificate, key)
+        return cls(mode)
+
+
+def application_uri(certificate: Path, default: str = "urn:softplc:client") -> str:
+    """The application URI in a certificate's subjectAltName (the client must announce the same)."""
+    from cryptography import x509
+
+    data = certificate.read_bytes()
+    loaded = x509.load_pem_x509_certificate(data) if data.startswith(b"-----") else x509.load_der_x509_certificate(data)
+    try:
+        names = loaded.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    except x509.ExtensionNotFound:
+        return default
+    uris = names.get_values_for_type(x509.UniformResourceIdentifier)
+    return uris[0] if uris else default
+
+
+@dataclass(frozen=True)
+class Login:
+    """Where and as whom to connect."""
+
+    endpoint: str = DEFAULT_ENDPOINT
+    user: str | None = None
+    password: str | None = None
+    security: Security = Security("None")
+    timeout: float = 4.0
+
+
+def _security_argument(text: str) -> Security:
+    try:
+        return Security.parse(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def add_login_arguments(
+    parser: argparse.ArgumentParser,
+    *,
+    endpoint: bool = True,
+    timeout: bool = True,
+    password_env: str = PASSWORD_ENV,
+    user_help: str = "",
+    security_help: str | None = None,
+) -> None:
+    """Add --endpoint and --timeout (unless the command has its own), --user, --password-stdin, --security."""
+    group = parser.add_argument_group("connection and login (OPC UA)")
+    if endpoint:
+        group.add_argument("--endpoint", default=DEFAULT_ENDPOINT, metavar="URL",
+                           help=f"the runtime's OPC UA endpoint (default {DEFAULT_ENDPOINT})")
+    group.add_argument("--user", metavar="NAME",
+                       help=f"log in as NAME; the password from --password-stdin, ${password_env} or a prompt "
+                       f"(default: anonymous, which a softplc lets only read){user_help}")
+    group.add_argument("--password-stdin", action="store_true", help="read the password from the first line of stdin")
+    group.add_argument("--security", type=_security_argument, metavar="MODE[,CERT,KEY]",
+                       help=security_help or "None (default), Sign or SignAndEncrypt (Basic256Sha256), optionally with "
+                       "the client certificate and key; without them one is made in ~/.softplc/client/ "
+                       "(the server must trust it: softplc opcua trust FINGERPRINT)")
+    if timeout:
+        group.add_argument("--timeout", type=_seconds, default=4.0, metavar="S", help="seconds to wait for each answer (default 4)")
+    parser.set_defaults(password_env=password_env)
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not 0 < value < 3600:
+        raise argparse.ArgumentTypeError(f"{text} is out of range: more than 0 and less than 3600 seconds")
+    return value
+
+
+def read_password(args: argparse.Namespace, stdin: TextIO | None = None) -> str | None:
+    """The password for --user: from stdin (--password-stdin), the environment, or a prompt; None without --user."""
+    if not getattr(args, "user", None):
+        if getattr(args, "password_stdin", False):
+            raise LoginError("--password-stdin needs --user NAME", "usage")
+        return None
+    stdin = stdin or sys.stdin
+    env_name = getattr(args, "password_env", PASSWORD_ENV)
+    if getattr(args, "password_stdin", False):
+        return stdin.readline().rstrip("\r\n")
+    if os.environ.get(env_name) is not None:
+        return os.environ[env_name]
+    if stdin.isatty():
+        return getpass.getpass(f"password for {args.user}: ")
+    raise LoginError(f"no password for --user {args.user}: give --password-stdin or ${env_name} (no terminal to ask on)", "refused")
+
+
+def login_from_args(args: argparse.Namespace, stdin: TextIO | None = None) -> Login:
+    """The Login the options describe (the password read now); raises LoginError."""
+    return Login(
+        endpoint=args.endpoint, user=args.user or None, password=read_password(args, stdin),
+        security=args.security or Security("None"), timeout=args.timeout,
+    )
+
+
+def with_certificate(security: Security, directory: Path = DEFAULT_CERTIFICATE_DIR) -> Security:
+    """A secured mode without CERT,KEY gets the client certificate kept in `directory` (made once)."""
+    if not security.secured or security.certificate is not None:
+        return security
+    from softplc.opcua.client import ensure_client_certificate
+
+    made = ensure_client_certificate(directory, CLIENT_NAME)
+    return Security(security.mode, made.certificate, made.private_key)
+
+
+async def connect(login: Login, certificate_dir: Path = DEFAULT_CERTIFICATE_DIR) -> Client:
+    """A connected asyncua Client (close it with `await client.disconnect()`); raises LoginError."""
+    from asyncua import ua
+
+    from softplc.opcua.client import ClientCertificate, make_client
+
+    security = with_certificate(login.security, certificate_dir)
+    certificate = None
+    if security.certificate is not None and security.key is not None:
+        certificate = ClientCertificate(security.certificate, security.key, application_uri(security.certificate))
+    try:
+        client = await make_client(
+            login.endpoint, user=login.user, password=login.password, certificate=certificate,
+            security="None" if not security.secured else f"Basic256Sha256_{security.mode}", timeout=login.timeout,
+        )
+    except (ValueError, OSError) as error:
+        raise LoginError(f"--security: {error}", "refused") from None
+    try:
+        await client.connect()
+    except ua.UaStatusCodeError as error:
+        await _close(client)
+        raise LoginError(_refusal(login, error.code, certificate), "refused" if _is_refusal(error.code) else "connect") from None
+    except (OSError, asyncio.TimeoutError, ConnectionError) as error:
+        await _close(client)
+        raise LoginError(f"cannot connect to {login.endpoint}: {_describe(error)} (is `softplc run` serving OPC UA there?)") from None
+    except Exception as error:  # asyncua raises plain Exceptions for some protocol mismatches
+        await _close(client)
+        raise LoginError(f"cannot connect to {login.endpoint}: {_describe(error)}") from None
+    return client
+
+
+async def _close(client: Client) -> None:
+    try:
+        await client.disconnect()
+    except Exception:  # half-open: nothing left to close cleanly
+        client.disconnect_socket()
+
+
+_REFUSALS = {
+    "BadUserAccessDenied": "login refused: wrong user name or password, or too many failed logins from here (wait a minute)",
+    "BadIdentityTokenInvalid": "login refused: this server does not accept that kind of login",
+    "BadIdentityTokenRejected": "login refused: wrong user name or password",
+    "BadCertificateUntrusted": "the server does not trust this client's certificate",
+    "BadSecurityChecksFailed": "the server refused this client's certificate or security settings",
+    "BadCertificateInvalid": "the server refused this client's certificate as invalid",
+    "BadCertificateTimeInvalid": "this client's certificate has expired or is not valid yet",
+    "BadSecurityPolicyRejected": "the server does not offer this security mode here",
+}
+
+
+def _is_refusal(code: int) -> bool:
+    from asyncua import ua
+
+    return ua.StatusCode(code).name in _REFUSALS
+
+
+def _refusal(login: Login, code: int, certificate: object) -> str:
+    from asyncua import ua
+
+    name = ua.StatusCode(code).name
+    text = _REFUSALS.get(name)
+    if text is None:
+        return f"cannot open a session on {login.endpoint}: {name}"
+    text = f"{login.endpoint}: {text} ({name})"
+    if login.user is None and name in ("BadUserAccessDenied", "BadIdentityTokenRejected", "BadIdentityTokenInvalid"):
+        text = f"{login.endpoint}: anonymous sessions are refused here: log in with --user NAME ({name})"
+    if name in ("BadCertificateUntrusted", "BadSecurityChecksFailed") and certificate is not None:
+        text += f"; on the server run: softplc opcua trust {getattr(certificate, 'fingerprint', '?')[:16]}"
+    if name == "BadSecurityPolicyRejected" and not login.security.secured:
+        text += "; try --security SignAndEncrypt"
+    return text
+
+
+def _describe(error: BaseException) -> str:
+    if isinstance(error, asyncio.TimeoutError):
+        return "no answer (timed out)"
+    if isinstance(error, ConnectionRefusedError):
+        return "connection refused"
+    return str(error) or type(error).__name__
