@@ -45,6 +45,9 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     # Historian (softplc.history)
     history = parser.add_argument_group("history")
     history.add_argument("--no-history", action="store_true", help="record no history (the history: section)")
+    # Audit trail (softplc.audit)
+    audit = parser.add_argument_group("audit trail")
+    audit.add_argument("--no-audit", action="store_true", help="keep no audit trail of writes and commands for this run (the audit: section)")
 
 
 def simulation_port(args: argparse.Namespace | None, *flags: str) -> int | None:
@@ -68,8 +71,9 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
     """
     from softplc.yamlsource import ConfigError, Problem
 
-    # Alarms first: the OPC UA server lists them (as conditions) when it starts.
-    builders = [_alarms, _fleet, _history]  # alarms, robots and the historian are not servers: --no-servers keeps them
+    # The audit trail first: it listens before any client can write, and stops last. Alarms
+    # next: the OPC UA server lists them (as conditions) when it starts.
+    builders = [_audit, _alarms, _fleet, _history]  # none of them is a server: --no-servers keeps them
     if not (args is not None and getattr(args, "no_servers", False)):
         builders += [_opcua, _modbus]
     adapters: list[Adapter] = []
@@ -172,6 +176,17 @@ def _fleet(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter
     from softplc.fleet.adapter import FleetAdapter
 
     return [FleetAdapter.from_config(config)]
+
+
+def _audit(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    from softplc.audit.settings import AuditSettings
+
+    settings = AuditSettings.from_config(config)  # checked by its section owner (softplc.audit.section)
+    if not settings.enabled or bool(getattr(args, "no_audit", False)):
+        return []
+    from softplc.audit.recorder import AuditRecorder
+
+    return [AuditRecorder(settings, config.name)]
 
 
 # -- historian (softplc.history) ----------------------------------------------------

@@ -34,6 +34,7 @@ SECTION_MODULES: tuple[str, ...] = (
     "softplc.fleet.section",
     "softplc.history.section",
     "softplc.alarms.section",
+    "softplc.audit.section",
 )
 
 

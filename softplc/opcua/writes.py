@@ -18,8 +18,8 @@ session's Write goes through) by `TagAttributeService`, which answers each item 
     BadIndexRangeInvalid      an IndexRange (tags are scalars)
 
 The access rules are the tag database's (`TagDatabase.validate`, `softplc.roles`), the same for
-every protocol; each item of a Write is submitted with the session's `Origin` (user, role), so
-the database reports it, accepted or refused, to its write listeners (the audit trail).
+every protocol; each item of a Write is submitted with the session's `Origin` (user, peer address,
+role), so the database reports it, accepted or refused, to its write listeners (the audit trail).
 
 UserAccessLevel, as read by a client session, tells what *its* role may do (a PostRead hook,
 `TagAttributeService.user_access_level`): CurrentRead|CurrentWrite (3) on the tags the role may
@@ -50,6 +50,7 @@ from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AddressSpace, AttributeService
 
+from softplc.opcua.commands import current_origin
 from softplc.opcua.roles import role_of
 from softplc.opcua.variants import WriteStatus, value_from_variant
 from softplc.roles import Role
@@ -115,7 +116,8 @@ class TagAttributeService(AttributeService):
         if len(items) > MAX_NODES_PER_WRITE:
             raise ServiceError(ua.StatusCodes.BadTooManyOperations)
         role = role_of(user)
-        origin = Origin("opcua", getattr(user, "name", None) or ("internal" if role is None else "anonymous"), role=role)
+        # The session's user, role and peer address (softplc/opcua/commands.py); the server's own writes have none.
+        origin = current_origin() or Origin("opcua", getattr(user, "name", None) or ("internal" if role is None else "anonymous"), role=role)
         results: list[ua.StatusCode | None] = [None] * len(items)
         batch: list[tuple[str, Any]] = []
         batch_indexes: list[int] = []

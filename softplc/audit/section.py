@@ -1,0 +1,8 @@
+"""The audit trail's part of tagdb.yaml: the optional `audit:` section (softplc/audit/settings.py)."""
+
+from __future__ import annotations
+
+from softplc.audit.settings import AUDIT_SCHEMA, problems
+from softplc.schema import Section
+
+SECTION = Section(path=("audit",), schema=AUDIT_SCHEMA, problems=problems)
