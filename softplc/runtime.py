@@ -118,7 +118,8 @@ class Runtime:
                 where = program.location or Location(str(self.config.path), 1, 1)
                 message = f"program '{program.name}' ({program.reference}) cannot be created: {type(error).__name__}: {error}"
                 raise ConfigError([Problem(where, message)]) from error
-            instance = ProgramInstance(program.name, created, program.bindings, program.restart)
+            instance = ProgramInstance(program.name, created, program.bindings, program.restart, program.on_fault,
+                                       reference=program.reference, params=program.params)
             if not program.enabled:
                 instance.state = ProgramState.STOPPED
             instances.append(instance)
@@ -162,6 +163,7 @@ class Runtime:
                     # Outside any cycle, yet watched like one: a setup() that blocks is named.
                     self.engine.run_setup(task, instance, lambda instance=instance: instance.reset(now))
                     self._apply_stall()
+        self.engine.commit_reactions()  # of a setup() that failed again
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -180,6 +182,7 @@ class Runtime:
         self._stall_detector.start()
         self.engine.start_programs()
         self._apply_stall()
+        self.engine.commit_reactions()  # of a setup() that failed at start-up
         self.system_tags.publish(self.clock.now())
         started: list[Adapter] = []
         try:
@@ -287,6 +290,7 @@ class Runtime:
         for instance in stalled_task.programs:
             if instance.name == program and instance.state is ProgramState.RUNNING:
                 instance.fault(message, self.clock.now())
+        self.engine.commit_reactions()  # the stuck cycle has committed; the reaction follows at once
         # Clients could not be answered while the loop was blocked; the first answers after it
         # must already say ERROR, not wait for the next publication (up to 0.5 s).
         self.system_tags.publish_state()

@@ -13,6 +13,7 @@ from softplc.config.findings import Findings
 from softplc.config.outputs import check_outputs
 from softplc.config.plant import PlantConfig
 from softplc.config.programs import ProgramChecker
+from softplc.config.reactions import legacy_problems
 from softplc.config.schema_check import describe, schema_check
 from softplc.config.tags import TagChecker
 from softplc.config.tasks import TaskChecker
@@ -40,7 +41,12 @@ def check_config(path: Path, data: Any, source: SourceMap) -> PlantConfig:
     if not isinstance(data, dict):
         raise ConfigError([source.problem((), f"the file must be a mapping of sections, not {describe(data)}")])
     findings = Findings(source)
-    problems, findings.schema_paths = schema_check(data, source, config_schema())
+    # An old form of a key (the restart policy before issue 17) is said once, with what to write
+    # instead, rather than as the schema's "unknown key" or "unknown value".
+    legacy, explained = legacy_problems(data, source)
+    for problem in legacy:
+        findings.add(problem)
+    problems, findings.schema_paths = schema_check(data, source, config_schema(), explained)
     for problem in problems:
         findings.add(problem)
     # The core's checks run on whatever is well-formed, so one pass reports as much as possible;
