@@ -62,6 +62,8 @@ class PlantConfig:
     tag_paths: dict[str, tuple[Any, ...]] = field(default_factory=dict)
     # Tags the section owners add to the runtime besides the system tags (Section.tags).
     contributed_tags: list[TagDef] = field(default_factory=list)
+    # Tags declared `shared_output: true` (several programs may write them).
+    shared_outputs: set[str] = field(default_factory=set)
 
     @property
     def base_dir(self) -> Path:
