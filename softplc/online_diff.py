@@ -90,9 +90,11 @@ def diff_configs(old: PlantConfig, new: PlantConfig, old_code: dict[str, str], n
             diff.needs_restart.append(f"program '{name}' moved from task '{old_programs[name][0]}' to '{task}'")
     for name in sorted(old_tasks.keys() & new_tasks.keys()):
         before, after = old_tasks[name], new_tasks[name]
-        for what, a, b in (("interval", before.interval, after.interval), ("watchdog", before.watchdog, after.watchdog)):
-            if a != b:
-                diff.needs_restart.append(f"task '{name}': {what} {format_duration(a)} → {format_duration(b)}")
+        if before.interval != after.interval:
+            diff.needs_restart.append(f"task '{name}': interval {format_duration(before.interval)} → {format_duration(after.interval)}")
+        follows = before.watchdog == before.interval and after.watchdog == after.interval  # the default: said once
+        if before.watchdog != after.watchdog and not follows:
+            diff.needs_restart.append(f"task '{name}': watchdog {format_duration(before.watchdog)} → {format_duration(after.watchdog)}")
         if before.priority != after.priority:
             diff.needs_restart.append(f"task '{name}': priority {before.priority} → {after.priority}")
         kept = [p.name for p in before.programs if p.name in {q.name for q in after.programs}]

@@ -52,10 +52,21 @@ class FreshModules:
     def __init__(self) -> None:
         self.modules: dict[str, ModuleType] = {}  # module name as configured → the fresh module
         self.digests: dict[str, str] = {}  # module name as configured → digest of the source compiled
+        self._failed: dict[str, BaseException] = {}
 
     def __call__(self, module_name: str, base_dir: Path) -> ModuleType:
-        if module_name in self.modules:  # two programs of one module share its classes
+        # Each module runs once per change: two programs of one module share its classes (or its error).
+        if module_name in self.modules:
             return self.modules[module_name]
+        if module_name in self._failed:
+            raise self._failed[module_name]
+        try:
+            return self._load(module_name, base_dir)
+        except BaseException as error:
+            self._failed[module_name] = error
+            raise
+
+    def _load(self, module_name: str, base_dir: Path) -> ModuleType:
         file = module_file(module_name, base_dir)
         if module_name.endswith(".py"):
             if file is None or not file.exists():
