@@ -37,7 +37,8 @@ EXIT_RETAIN_CORRUPT = 3  # `softplc run`: retain.sqlite is corrupt; nothing star
 DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules that add subcommands (each defines add_commands(subparsers)).
-COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.commands", "softplc.scenarios.commands", "softplc.latency.command", "softplc.opcua.cli", "softplc.fleet.cli")
+COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.commands", "softplc.scenarios.commands", "softplc.latency.command", "softplc.opcua.cli", "softplc.fleet.cli",
+                                    "softplc.apply_cli")
 
 log = logging.getLogger("softplc")
 
