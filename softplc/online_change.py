@@ -14,6 +14,7 @@ changes, so no task misses a cycle. `{"check": true}` checks and shows the diffe
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import sys
@@ -21,7 +22,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from softplc.clock import Clock
+from softplc.clock import Clock, wait_for
 from softplc.commands import CommandRefused, Commands, Permission
 from softplc.config.fresh import FreshModules, module_file, source_digest
 from softplc.config.loader import load_config
@@ -44,6 +45,7 @@ CHECK_SWITCH_INTERVAL = 0.0005
 # ... and the check steps aside whenever a cycle is due (softplc/scan_gate.py). bench/online_change.py
 # --no-gate shows why: without it the 10 ms task's median start latency grows from ~0.01 to ~1-2.5 ms.
 USE_SCAN_GATE = True
+CHECK_TIMEOUT = 60.0  # a new version's setup() that never returns: the engineer is told, not left waiting
 
 
 class _Runtime(Protocol):
@@ -90,6 +92,7 @@ class OnlineChange:
         self.code = _code_digests(runtime.config)  # each program's module source as it was loaded
         self.applied = 0
         self._busy: Origin | None = None
+        self._step = ""  # what the check is doing (read from the loop if it takes too long)
         # The check runs in a worker thread on the real clock: it steps aside around every release.
         self._gate = ScanGate(runtime.engine, runtime.clock) if USE_SCAN_GATE and not runtime.clock.simulated else None
         runtime.commands.register(
@@ -108,8 +111,16 @@ class OnlineChange:
         if self._busy is not None:
             raise CommandRefused(f"an online change is already under way (asked by {self._busy}): try again when it is done")
         self._busy = origin or Origin("runtime", role=None)
+        self._step = "reading the file"
+        work = asyncio.ensure_future(self.runtime.clock.run_blocking(self._prepare))
         try:
-            prepared = await self.runtime.clock.run_blocking(self._prepare)
+            try:
+                prepared = await wait_for(self.runtime.clock, asyncio.shield(work), CHECK_TIMEOUT)
+            except TimeoutError:
+                # The worker thread cannot be stopped: the next change waits until it has returned.
+                work.add_done_callback(lambda _: setattr(self, "_busy", None))
+                raise CommandRefused(f"the check has not finished after {CHECK_TIMEOUT:g} s ({self._step}): nothing applied; "
+                                     "no other change can be applied until it returns") from None
             details = self._details(prepared)
             if prepared.problems:
                 raise ChangeRefused(_refusal(f"{len(prepared.problems)} problem(s)", prepared.problems, prepared.diff), details)
@@ -122,7 +133,8 @@ class OnlineChange:
                 raise CommandRefused("the runtime is stopping: nothing applied")
             return {**details, **self._swap(prepared)}
         finally:
-            self._busy = None
+            if work.done():
+                self._busy = None
 
     # -- off the scan path ------------------------------------------------------------------
 
@@ -143,6 +155,7 @@ class OnlineChange:
 
     def _check(self, prepared: Prepared) -> Prepared:
         """The file checked with fresh modules, the differences, and the new versions set up (warm)."""
+        self._step = f"checking {self.config.path} and importing its program modules"
         try:
             config = load_config(self.config.path, load_module=prepared.modules)
         except ConfigError as error:
@@ -156,6 +169,7 @@ class OnlineChange:
         programs = {program.name: program for task in config.tasks for program in task.programs}
         for change in prepared.diff.programs:
             if change.new_program:
+                self._step = f"setup() of the new version of program {change.name}"
                 self._new_version(prepared, programs[change.name])
         return prepared
 
@@ -181,6 +195,7 @@ class OnlineChange:
         config = prepared.config
         assert config is not None
         current = {instance.name: (task, instance) for task in self.runtime.tasks for instance in task.programs}
+        config_of = {program.name: program for task in config.tasks for program in task.programs}
         changes = {change.name: change for change in prepared.diff.programs}
         carried: dict[str, list[str] | None] = {}
         for name, program in prepared.programs.items():  # user code first: if it raises, nothing is swapped
@@ -203,13 +218,13 @@ class OnlineChange:
                 programs.append(instance)
             task.replace_programs(programs)
         self.runtime.programs_changed()  # of programs the change disabled
-        prepared.modules.install()
+        prepared.modules.install({split_reference(config_of[name].reference)[0] for name in prepared.programs})
         self.config = config
         self.runtime.config = config
         self.code = prepared.code
         self.applied += 1
         names = ", ".join(entry["name"] for entry in report) or "program order"
-        log.warning("online change %d applied from %s: %s", self.applied, config.path, "; ".join(prepared.diff.lines()))
+        log.info("online change %d applied from %s: %s", self.applied, config.path, "; ".join(prepared.diff.lines()))
         return {"applied": True, "programs": report, "summary": f"online change {self.applied} applied: {names}"}
 
     @staticmethod

@@ -12,6 +12,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import pytest
+
 from softplc.clock import RealClock
 
 from test_online_change import Plant
@@ -51,5 +53,31 @@ async def test_a_10ms_task_misses_no_cycle_while_its_program_is_changed_online(t
             # every cycle scanned the program exactly once: its carried-over count is the task's cycle count
             assert mix.program.count == fast.stats.cycles == plant.value("scans")
         assert 0 in missed, f"cycles missed while each change was checked and swapped: {missed}"
+    finally:
+        await runtime.stop()
+
+
+async def test_a_new_version_whose_setup_does_not_return_is_reported_and_blocks_the_next_change(tmp_path: Path, monkeypatch) -> None:
+    from softplc import online_change
+    from softplc.commands import CommandRefused
+
+    monkeypatch.setattr(online_change, "CHECK_TIMEOUT", 0.3)
+    plant = Plant(tmp_path, RealClock())
+    runtime = plant.runtime
+    await runtime.start()
+    try:
+        plant.edit("        self.count = 0\n", "        self.count = 0\n        import time\n        time.sleep(1.0)\n")
+        started = time.monotonic()
+        with pytest.raises(CommandRefused, match=r"the check has not finished after 0.3 s \(setup\(\) of the new version of program mix\): "
+                                                 "nothing applied; no other change can be applied until it returns"):
+            await plant.apply()
+        assert time.monotonic() - started < 0.9
+        with pytest.raises(CommandRefused, match=r"an online change is already under way \(asked by cli:erin@127.0.0.1\)"):
+            await plant.apply()
+        assert runtime.program("mix").version == 1 and runtime.engine.tasks[0].stats.cycles > 0
+        await wait_until(lambda: runtime.online_change._busy is None, 5, "the stuck check to return")
+        plant.edit("        import time\n        time.sleep(1.0)\n", "")
+        plant.edit("self.version = 1", "self.version = 2")
+        assert (await plant.apply())["applied"] is True and runtime.program("mix").version == 2
     finally:
         await runtime.stop()

@@ -102,8 +102,13 @@ class FreshModules:
         self.digests[module_name] = hashlib.sha256(source).hexdigest()
         return module
 
-    def install(self) -> None:
-        """Make the fresh modules the ones `import` finds from now on (once the change is swapped in)."""
-        for module in self.modules.values():
-            if not module.__name__.startswith(USER_PREFIX):
-                sys.modules[module.__name__] = module
+    def install(self, names: set[str]) -> None:
+        """Make these fresh modules the ones `import` finds from now on (once the change is swapped in)."""
+        for configured in names:
+            module = self.modules.get(configured)
+            if module is None or module.__name__.startswith(USER_PREFIX):
+                continue
+            sys.modules[module.__name__] = module
+            parent, _, child = module.__name__.rpartition(".")
+            if parent in sys.modules:  # `import programs.x` binds programs.x too
+                setattr(sys.modules[parent], child, module)
