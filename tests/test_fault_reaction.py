@@ -263,3 +263,42 @@ def test_blocks_created_by_a_warm_start_take_their_first_input_as_memory() -> No
     with warm_start():
         falling = F_TRIG()
     assert falling(CLK=True) is False and falling(CLK=False) is True  # a warm memory of TRUE, then a real edge
+
+
+async def test_a_stall_applies_the_reaction_as_soon_as_the_stuck_scan_returns(make_config, tmp_path: Path) -> None:
+    import asyncio
+    import time
+
+    from softplc.clock import RealClock
+
+    text = f"""
+version: 1
+tags:
+  armed: {{type: bool}}
+  done: {{type: uint32}}
+runtime: {{stall_after: 200ms}}
+tasks:
+  fast:
+    interval: 10ms
+    programs:
+      - name: block
+        program: "{CORE}:Blocker"
+        bind: {{armed: armed, done: done}}
+        params: {{block: 0.5, once: true}}
+        on_fault: {{safe: {{done: 99}}}}
+"""
+    runtime = Runtime(make_config(text), RealClock(), state_dir=tmp_path / "state")
+    seen: list[Any] = []
+    runtime.db.on_change(lambda tags: seen.extend((t.name, t.value) for t in tags if t.name == "done"))
+    await runtime.start()
+    try:
+        runtime.db.submit([("armed", True)], "test")
+        deadline = time.monotonic() + 10
+        while runtime.program("block").state.value != "FAULTED":
+            assert time.monotonic() < deadline, "the stall was not noticed"
+            await asyncio.sleep(0.01)
+        assert runtime.program("block").error.startswith("task fast is stuck in program block for ")
+        # the stuck scan's own output was committed by its cycle, then the reaction at once
+        assert seen == [("done", 1), ("done", 99)] and runtime.db.value("done") == 99
+    finally:
+        await runtime.stop()
