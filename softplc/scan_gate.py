@@ -17,7 +17,7 @@ import contextlib
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any
 
@@ -37,7 +37,7 @@ class ScanGate:
         self.pauses = 0  # how many times a worker stepped aside
         self._ran = threading.Event()
         self._watching = False
-        self._open_until = 0.0  # clock time until which no release is near
+        self._open_until = 0.0  # time.monotonic() until which no release is near
         engine.after_cycle(self._cycle_ran)  # registered on the loop's thread, once
 
     def _cycle_ran(self, task: Task) -> None:
@@ -63,14 +63,15 @@ class ScanGate:
     def _next_release(self) -> float:
         return min((task.next_release for task in self.engine.tasks), default=float("inf"))
 
-    def _event(self, frame: FrameType, event: str, arg: Any) -> None:
-        now = self.clock.now()
-        if now < self._open_until:
+    def _event(self, frame: FrameType, event: str, arg: Any, monotonic: Callable[[], float] = time.monotonic) -> None:
+        # Called at every Python call and return of the worker: the common case is one comparison.
+        if monotonic() < self._open_until:
             return
+        now = self.clock.now()
         release = self._next_release()
         margin = self._margin()
         if release - now > margin:
-            self._open_until = release - margin
+            self._open_until = monotonic() + (release - now - margin)  # the worker's own time base
             return
         # A cycle is due: wait (Event.wait releases the lock) until it has run, i.e. until no task
         # is due at that release any more and no cycle is under way. Woken by the engine, not polling.
