@@ -54,7 +54,8 @@ def add_commands(subparsers: Any) -> None:
     parser.add_argument("--endpoint", help="the runtime's OPC UA endpoint (default: from CONFIG's servers.opcua)")
     parser.add_argument("--user", help=f"an engineer's user name (password: --password-stdin, ${PASSWORD_ENV} or a prompt)")
     parser.add_argument("--password-stdin", action="store_true", help="read the password from the first line of stdin")
-    parser.add_argument("--security", metavar="MODE[,CERT,KEY]", help="None, Sign or SignAndEncrypt (Basic256Sha256) with a client certificate")
+    parser.add_argument("--security", metavar="MODE[,CERT,KEY]",
+                        help="None, Sign or SignAndEncrypt (Basic256Sha256) with a client certificate")
     parser.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for the runtime's answer (default 60)")
     parser.set_defaults(func=cmd_apply)
 

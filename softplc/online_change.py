@@ -125,7 +125,8 @@ class OnlineChange:
             if prepared.problems:
                 raise ChangeRefused(_refusal(f"{len(prepared.problems)} problem(s)", prepared.problems, prepared.diff), details)
             if prepared.diff.needs_restart:
-                raise ChangeRefused(_refusal("changes that need a restart of the runtime", prepared.diff.needs_restart, prepared.diff), details)
+                reasons = prepared.diff.needs_restart
+                raise ChangeRefused(_refusal("changes that need a restart of the runtime", reasons, prepared.diff), details)
             if check or prepared.diff.empty:
                 what = "nothing to apply: the running programs match the file" if prepared.diff.empty else "checked, not applied"
                 return {**details, "summary": f"{what} ({self.config.path})"}

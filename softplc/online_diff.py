@@ -155,7 +155,8 @@ def _tag_changes(old: PlantConfig, new: PlantConfig) -> list[str]:
                 reasons.append(f"tag '{name}': {what} {shown[0]!r} → {shown[1]!r}")
     if old.shared_outputs != new.shared_outputs:
         for name in sorted(old.shared_outputs ^ new.shared_outputs):
-            reasons.append(f"tag '{name}': shared_output {str(name in old.shared_outputs).lower()} → {str(name in new.shared_outputs).lower()}")
+            before, after = (str(name in config.shared_outputs).lower() for config in (old, new))
+            reasons.append(f"tag '{name}': shared_output {before} → {after}")
     return sorted(reasons)
 
 

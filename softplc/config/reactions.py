@@ -61,7 +61,8 @@ def _legacy_message(spec: dict[str, Any], old: list[str]) -> str:
         maximum = _yaml(spec.get("max_restarts", 3))
         return f"'{written}' is the old restart policy: write restart: {{delay: {delay}, max: {maximum}}} instead; {outputs}"
     if spec.get("on_fault") == "stop" and len(old) == 1:
-        return f"'{written}' is the old restart policy: remove it (a faulted program stays FAULTED unless it says restart: {{delay: 1s, max: 3}}); {outputs}"
+        return (f"'{written}' is the old restart policy: remove it (a faulted program stays FAULTED unless it says "
+                f"restart: {{delay: 1s, max: 3}}); {outputs}")
     return (f"'{written}' belongs to the old restart policy (and never restarted this program without on_fault: restart): "
             "remove it, or write restart: {delay: 1s, max: 3} to restart the program after a fault; " + outputs)
 
