@@ -159,7 +159,9 @@ class Commands:
                 *, audited: bool, done: Any = None) -> None:
         if not audited or origin.role is None or not self._listeners:
             return
-        detail = str(refusal) if refusal is not None else (done if isinstance(done, str) else "")
+        # What it did: a text result, or the "summary" of a structured one (e.g. an online change's).
+        summary = done.get("summary") if isinstance(done, Mapping) else done
+        detail = str(refusal) if refusal is not None else (summary if isinstance(summary, str) else "")
         call = CommandCall(self._now(), origin, name, arguments, refusal is None, detail)
         for listener in list(self._listeners):
             try:

@@ -6,9 +6,21 @@ clock. Call a block once per scan, as in a PLC:
     self.delay = TON(self.clock)          # in setup()
     self.delay(IN=self.ready, PT=2.0)     # in scan(); PT in seconds
     if self.delay.Q: ...
+
+**Restarts make no false edges.** IEC 61131-3 starts an edge detector's memory at FALSE, so at a
+cold start an input that is already TRUE is a rising edge in the first scan — kept here for the
+plant's start. A program that is *restarted* (after a fault, by `reset_faults`, by
+`programs.start`/`restart`, or as the new version of an online change) runs its `setup()` inside
+`warm_start()`: every edge detector created there (R_TRIG, F_TRIG, and those inside CTU, CTD
+and TP) takes the value of its first call as its memory instead, so a signal that stayed high
+across the fault is not counted again. Timers (TON, TOF) simply start from their current input.
 """
 
 from __future__ import annotations
+
+import contextlib
+import contextvars
+from collections.abc import Iterator
 
 from softplc.clock import Clock
 
@@ -19,6 +31,23 @@ from softplc.clock import Clock
 # tolerance; otherwise 8.0 - 6.000000000000001 < 2.0 would delay Q by a whole scan. 1 µs is far
 # below the shortest task interval (100 µs) and far above float rounding over months of runtime.
 _TOLERANCE = 1e-6
+
+_WARM_START: contextvars.ContextVar[bool] = contextvars.ContextVar("softplc_warm_start", default=False)
+
+
+@contextlib.contextmanager
+def warm_start() -> Iterator[None]:
+    """Edge detectors created inside take their first input as memory (a restart's `setup()`)."""
+    token = _WARM_START.set(True)
+    try:
+        yield
+    finally:
+        _WARM_START.reset(token)
+
+
+def _learns_first_input() -> bool:
+    """Whether a block created now is created by a warm start (see `warm_start`)."""
+    return _WARM_START.get()
 
 
 class TON:
@@ -94,10 +123,14 @@ class TP:
         self.ET = 0.0
         self._start: float | None = None
         self._previous_in = False
+        self._learn = _learns_first_input()
 
     def __call__(self, IN: bool, PT: float | None = None) -> bool:
         if PT is not None:
             self.PT = PT
+        if self._learn:  # created by a warm start: an IN already high is no edge
+            self._learn = False
+            self._previous_in = IN
         now = self._clock.now()
         if IN and not self._previous_in and self._start is None:
             self._start = now
@@ -126,8 +159,12 @@ class R_TRIG:
     def __init__(self) -> None:
         self.CLK = False
         self.Q = False
+        self._learn = _learns_first_input()
 
     def __call__(self, CLK: bool) -> bool:
+        if self._learn:  # created by a warm start: the first CLK is the memory, not an edge
+            self._learn = False
+            self.CLK = CLK
         self.Q = CLK and not self.CLK
         self.CLK = CLK
         return self.Q
@@ -139,8 +176,12 @@ class F_TRIG:
     def __init__(self) -> None:
         self.CLK = False
         self.Q = False
+        self._learn = _learns_first_input()
 
     def __call__(self, CLK: bool) -> bool:
+        if self._learn:  # created by a warm start: the first CLK is the memory, not an edge
+            self._learn = False
+            self.CLK = CLK
         self.Q = self.CLK and not CLK
         self.CLK = CLK
         return self.Q

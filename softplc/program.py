@@ -116,10 +116,14 @@ def program_log(name: str) -> logging.Logger:
 
 
 class Program:
-    """Base class of scan programs. Override `scan()`; optionally `setup()`."""
+    """Base class of scan programs. Override `scan()`; optionally `setup()` and `carry_over()`."""
 
     variables: ClassVar[dict[str, Variable]] = {}
     params: ClassVar[dict[str, Param]] = {}
+    # Set by the runtime: True during the first scan after a start or a restart; and whether the
+    # last setup() was a restart (after a fault, by programs.start/restart, or an online change).
+    first_scan: bool = True
+    restarted: bool = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -152,3 +156,33 @@ class Program:
     def scan(self) -> None:
         """One scan: read the bound variables, compute, assign outputs."""
         raise NotImplementedError(f"{type(self).__name__} must define scan()")
+
+    def carry_over(self, old: Program) -> list[str] | None:
+        """Take over the state of `old`, the version this one replaces in an online change.
+
+        Called at the scan boundary of the swap, after this instance's `setup()`, so it must be
+        quick. The default carries every attribute both have under the same name and type (or
+        that this one's setup() left None) — timers, edge detectors, counters, lists — except the
+        bound variables (loaded each scan), the parameters (the new configuration's win) and the
+        runtime's own, like a PLC's online change keeps each variable whose declaration did not
+        change. Override it to convert state, or return [] to carry nothing. Returns the names
+        carried (for the engineer's report), or None when an override does not say.
+        """
+        return carry_attributes(old, self)
+
+
+_RUNTIME_ATTRIBUTES = frozenset({"name", "clock", "log", "first_scan", "restarted"})
+
+
+def carry_attributes(old: Program, new: Program) -> list[str]:
+    """Copy from `old` to `new` each attribute both have with the same type (see `Program.carry_over`)."""
+    skip = _RUNTIME_ATTRIBUTES | set(type(new).variables) | set(type(new).params)
+    mine = new.__dict__
+    carried = []
+    for name, value in old.__dict__.items():
+        if name in skip or name not in mine:
+            continue
+        if mine[name] is None or type(mine[name]) is type(value):
+            mine[name] = value
+            carried.append(name)
+    return carried

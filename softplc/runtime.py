@@ -3,7 +3,7 @@
 The core (tag database, scan engine, clock) knows nothing of protocols or robots; adapters
 (see `softplc.adapters`) are handed the runtime when they start and use only its public API:
 `runtime.db` (values: snapshot, subscribe to changes, submit writes with an origin),
-`runtime.commands` (actions with an origin: reset faults, acknowledge alarms...),
+`runtime.commands` (actions with an origin: reset faults, program control, online change...),
 `runtime.events` (what happened: alarm transitions...), `runtime.clock`, `runtime.engine`,
 `runtime.spawn()`.
 """
@@ -14,7 +14,7 @@ import asyncio
 import enum
 import gc
 import logging
-from collections.abc import Coroutine
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -24,7 +24,9 @@ from softplc.config import PlantConfig
 from softplc.durations import parse_duration
 from softplc.events import EventBus
 from softplc.expression import Condition
+from softplc.online_change import OnlineChange
 from softplc.program import ProgramContext
+from softplc.program_control import register_program_commands
 from softplc.retain import RetainStore, open_retained
 from softplc.runtime_commands import register_runtime_commands
 from softplc.scan import ProgramInstance, ProgramState, ScanEngine, Task
@@ -92,6 +94,8 @@ class Runtime:
         self.commands = Commands(self.clock.wall)
         self.events = EventBus()
         register_runtime_commands(self)
+        register_program_commands(self)
+        self.online_change = OnlineChange(self)
         self.adapters: list[Adapter] = []
         self.state = RuntimeState.STARTING
         self.error = ""
@@ -118,7 +122,8 @@ class Runtime:
                 where = program.location or Location(str(self.config.path), 1, 1)
                 message = f"program '{program.name}' ({program.reference}) cannot be created: {type(error).__name__}: {error}"
                 raise ConfigError([Problem(where, message)]) from error
-            instance = ProgramInstance(program.name, created, program.bindings, program.restart)
+            instance = ProgramInstance(program.name, created, program.bindings, program.restart, program.on_fault,
+                                       reference=program.reference, params=program.params)
             if not program.enabled:
                 instance.state = ProgramState.STOPPED
             instances.append(instance)
@@ -132,6 +137,28 @@ class Runtime:
                 if instance.name == name:
                     return instance
         raise KeyError(name)
+
+    @property
+    def stopping(self) -> bool:
+        """Whether the runtime is stopping or stopped (an online change then applies nothing)."""
+        return self.state in (RuntimeState.STOPPING, RuntimeState.STOPPED)
+
+    @property
+    def shared_outputs(self) -> set[str]:
+        """Tags several programs may write (`shared_output: true`)."""
+        return self.config.shared_outputs
+
+    def run_setup(self, task: Task, instance: ProgramInstance, setup: Callable[[], None]) -> None:
+        """Run a program's setup() outside a cycle (a reset, a command), watched for stalls like a scan."""
+        self.engine.run_setup(task, instance, setup)
+        self._apply_stall()
+        self.programs_changed()
+
+    def programs_changed(self) -> None:
+        """After a change outside a cycle (a failed setup(), a stall, a command): commit the fault
+        reactions due and publish the programs' states now, not at the next publication."""
+        self.engine.commit_reactions()
+        self.system_tags.publish_state()
 
     def add_adapter(self, adapter: Adapter) -> None:
         self.adapters.append(adapter)
@@ -160,8 +187,7 @@ class Runtime:
             for instance in task.programs:
                 if instance.state is ProgramState.FAULTED:
                     # Outside any cycle, yet watched like one: a setup() that blocks is named.
-                    self.engine.run_setup(task, instance, lambda instance=instance: instance.reset(now))
-                    self._apply_stall()
+                    self.run_setup(task, instance, lambda instance=instance: instance.reset(now))
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -180,6 +206,7 @@ class Runtime:
         self._stall_detector.start()
         self.engine.start_programs()
         self._apply_stall()
+        self.programs_changed()  # of a setup() that failed at start-up
         self.system_tags.publish(self.clock.now())
         started: list[Adapter] = []
         try:
@@ -287,9 +314,10 @@ class Runtime:
         for instance in stalled_task.programs:
             if instance.name == program and instance.state is ProgramState.RUNNING:
                 instance.fault(message, self.clock.now())
-        # Clients could not be answered while the loop was blocked; the first answers after it
-        # must already say ERROR, not wait for the next publication (up to 0.5 s).
-        self.system_tags.publish_state()
+        # The stuck cycle has committed; the reaction follows at once. Clients could not be answered
+        # while the loop was blocked; the first answers after it must already say ERROR, not wait
+        # for the next publication (up to 0.5 s).
+        self.programs_changed()
 
     def _on_stall(self, task: Task, program: str, message: str) -> None:
         # Called from the stall detector's thread while the loop is blocked: only plain

@@ -13,145 +13,21 @@ release skips the missed releases and counts them as overruns; it never bursts t
 from __future__ import annotations
 
 import asyncio
-import enum
+import logging
 import math
 import time
-import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from softplc.clock import Clock
-from softplc.log_format import BRIEF_TRACEBACK
-from softplc.program import Direction, Program, program_log
+from softplc.program_instance import NEVER, ProgramInstance, ProgramState, RestartPolicy
 from softplc.stats import TimingSeries
-from softplc.tagdb import Rule, TagDatabase, WriteRejected
+from softplc.tagdb import TagDatabase
 
+__all__ = ["NEVER", "CurrentScan", "ProgramInstance", "ProgramState", "RestartPolicy", "ScanEngine", "Task", "TaskStats"]
 
-class ProgramState(enum.Enum):
-    RUNNING = "RUNNING"
-    FAULTED = "FAULTED"
-    STOPPED = "STOPPED"
-
-
-@dataclass(frozen=True)
-class RestartPolicy:
-    """What to do when a program raises: stay FAULTED (`stop`) or restart after a delay."""
-
-    on_fault: str = "stop"  # "stop" | "restart"
-    delay: float = 1.0
-    max_restarts: int = 3
-
-
-Binding = str | list[str]
-
-
-class ProgramInstance:
-    """A program object with its tag bindings, its state and its fault record."""
-
-    def __init__(
-        self,
-        name: str,
-        program: Program,
-        bindings: dict[str, Binding],
-        restart: RestartPolicy = RestartPolicy(),
-    ) -> None:
-        self.name = name
-        self.program = program
-        self.bindings = bindings
-        self.restart = restart
-        self.state = ProgramState.RUNNING
-        self.error = ""
-        self.faults = 0
-        self.restarts = 0
-        self._retry_at = math.inf
-        variables = type(program).variables
-        self.outputs = {var: tag for var, tag in bindings.items() if variables[var].direction.writes}
-        # Optional variables left unbound read as None and are never written.
-        for var, variable in variables.items():
-            if var not in bindings:
-                setattr(program, var, None)
-
-    @property
-    def tag_names(self) -> list[str]:
-        names: list[str] = []
-        for binding in self.bindings.values():
-            names.extend([binding] if isinstance(binding, str) else binding)
-        return names
-
-    def start(self, now: float = 0.0) -> None:
-        """Run the program's setup; a setup that raises faults the program."""
-        try:
-            self.program.setup()
-        except (Exception, SystemExit) as error:  # sys.exit() in a program must not end the runtime
-            self.fault(error, now)
-
-    def fault(self, error: BaseException | str, now: float) -> None:
-        self.state = ProgramState.FAULTED
-        self.faults += 1
-        if isinstance(error, BaseException):
-            frame = traceback.extract_tb(error.__traceback__)[-1:] if error.__traceback__ else []
-            where = f" at {frame[0].filename}:{frame[0].lineno}" if frame else ""
-            self.error = f"{type(error).__name__}: {error}{where}"
-        else:
-            self.error = error
-        # Under the program's own logger; the traceback is shown with -v (softplc.log_format).
-        program_log(self.name).error("program %s FAULTED: %s", self.name, self.error,
-                                     exc_info=error if isinstance(error, BaseException) else None,
-                                     extra={BRIEF_TRACEBACK: True})
-        if self.restart.on_fault == "restart" and self.restarts < self.restart.max_restarts:
-            self._retry_at = now + self.restart.delay
-        else:
-            self._retry_at = math.inf
-
-    def reset(self, now: float = 0.0) -> None:
-        """Clear a fault and start again (an operator's reset)."""
-        self.restarts = 0
-        self.state = ProgramState.RUNNING
-        self.error = ""
-        self._retry_at = math.inf
-        self.start(now)
-
-    def restart_due(self, now: float) -> bool:
-        """Whether a FAULTED program's restart delay has passed (see `maybe_restart`)."""
-        return self.state is ProgramState.FAULTED and now >= self._retry_at
-
-    def maybe_restart(self, now: float) -> None:
-        if self.restart_due(now):
-            self.restarts += 1
-            program_log(self.name).warning("restarting program %s (restart %d of %d)", self.name, self.restarts, self.restart.max_restarts)
-            self.state = ProgramState.RUNNING
-            self._retry_at = math.inf
-            self.start(now)  # a setup that fails again waits the full delay before the next try
-
-    def scan(self, image: dict[str, Any], db: TagDatabase, now: float) -> dict[str, Any]:
-        """Run one scan against `image`; return the validated outputs (empty if it faulted)."""
-        program = self.program
-        attributes = program.__dict__
-        for var, binding in self.bindings.items():
-            attributes[var] = image[binding] if isinstance(binding, str) else [image[t] for t in binding]
-        try:
-            program.scan()
-        except (Exception, SystemExit) as error:  # sys.exit() in a program must not end the runtime
-            self.fault(error, now)
-            return {}
-        outputs: dict[str, Any] = {}
-        try:
-            for var, binding in self.outputs.items():
-                value = attributes[var]
-                if isinstance(binding, str):
-                    if value != image[binding] or type(value) is not type(image[binding]):
-                        outputs[binding] = db.validate(binding, value, role=None)
-                    continue
-                if not isinstance(value, list) or len(value) != len(binding):
-                    raise WriteRejected(var, Rule.TYPE_MISMATCH, f"must stay a list of {len(binding)} values")
-                for tag, item in zip(binding, value):
-                    if item != image[tag] or type(item) is not type(image[tag]):
-                        outputs[tag] = db.validate(tag, item, role=None)
-        except WriteRejected as rejected:
-            self.fault(f"wrote an invalid value: {rejected}", now)
-            return {}
-        return outputs
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -192,12 +68,10 @@ class Task:
         self.interval = interval
         self.priority = priority
         self.watchdog = watchdog if watchdog is not None else interval
-        self.programs = list(programs)
+        self.programs: list[ProgramInstance] = []
+        self.tag_names: list[str] = []
+        self.replace_programs(programs)
         self.stats = TaskStats()
-        names: dict[str, None] = {}
-        for instance in self.programs:
-            names.update(dict.fromkeys(instance.tag_names))
-        self.tag_names = list(names)
         self.next_release = 0.0
         # Read by the stall detector (another thread) while a cycle or a setup is under way:
         # the program running now, and whether it is in its setup() rather than its scan().
@@ -206,6 +80,15 @@ class Task:
         self._origin = 0.0
         self._k = 0
         self._last_start: float | None = None
+
+    def replace_programs(self, programs: Sequence[ProgramInstance]) -> None:
+        """Scan these programs from the next cycle on (an online change swaps them between two cycles)."""
+        names: dict[str, None] = {}
+        for instance in programs:
+            names.update(dict.fromkeys(instance.tag_names))
+        # Two assignments, no cycle in between: the scan runs on the same event loop as the caller.
+        self.tag_names = list(names)
+        self.programs = list(programs)
 
     def schedule_from(self, origin: float) -> None:
         self._origin = origin
@@ -229,7 +112,11 @@ class Task:
                 finally:
                     self.running_setup = False
                 if instance.state is not ProgramState.RUNNING:
+                    produced = instance.reaction_values(db)  # its setup() failed again
+                    image.update(produced)
+                    outputs.update(produced)
                     continue
+            # A fault's reaction comes back instead of the scan's outputs, committed by this cycle.
             produced = instance.scan(image, db, now)
             if produced:
                 image.update(produced)
@@ -289,6 +176,14 @@ class ScanEngine:
         for task in self.tasks:
             for instance in task.programs:
                 self.run_setup(task, instance, instance.start)
+
+    def commit_reactions(self) -> list[str]:
+        """Commit the fault reactions due outside a cycle (a setup() at start-up or reset, a stall, a stop)."""
+        values: dict[str, Any] = {}
+        for task in self.tasks:
+            for instance in task.programs:
+                values.update(instance.reaction_values(self.db))
+        return [tag.name for tag in self.db.commit(values)] if values else []
 
     def run_setup(self, task: Task, instance: ProgramInstance, setup: Callable[[], None]) -> None:
         """Run `setup` (a program's start or reset) outside a cycle, seen by the stall detector as that program's."""

@@ -111,9 +111,35 @@ PROGRAM: dict[str, Any] = {
             "description": "Variable → tag name (or list of tag names).",
         },
         "params": {"type": "object", "description": "Constant parameters of the program."},
-        "on_fault": {"enum": ["stop", "restart"], "description": "stop: stay FAULTED; restart: restart after restart_delay."},
-        "restart_delay": DURATION,
-        "max_restarts": {"type": "integer", "minimum": 0},
+        "on_fault": {
+            "description": "What the program's outputs do in the scan in which it faults (and when it is stopped): hold "
+            "(the default: keep their last values), initial (Output tags back to their initial values), or "
+            "{safe: {TAG: value}, others: hold|initial}.",
+            "type": ["string", "object"],
+            "if": {"type": "string"},
+            "then": {"enum": ["hold", "initial"]},
+            "properties": {
+                "safe": {
+                    "type": "object",
+                    "additionalProperties": {"type": ["boolean", "number", "string"]},
+                    "description": "TAG: safe value, for tags the program writes (its Output and InOut variables).",
+                },
+                "others": {"enum": ["hold", "initial"], "description": "What the outputs not named in safe do (default hold)."},
+            },
+            "required": ["safe"],
+            "additionalProperties": False,
+        },
+        "restart": {
+            "description": "Restart the program by itself after a fault: never (the default) or {delay: 1s, max: 3}.",
+            "type": ["string", "object"],
+            "if": {"type": "string"},
+            "then": {"enum": ["never"]},
+            "properties": {
+                "delay": DURATION,
+                "max": {"type": "integer", "minimum": 0, "description": "Restarts before it stays FAULTED (default 3)."},
+            },
+            "additionalProperties": False,
+        },
         "enabled": {"type": "boolean"},
     },
     "required": ["name", "program"],

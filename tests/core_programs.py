@@ -179,3 +179,57 @@ class SlowSetup(Program):
             self.raised = True
             raise RuntimeError("first scan fails")
         self.scans += 1
+
+
+class FillValve(Program):
+    """Opens a fill valve and runs its pump at a speed while `demand`; raises while `armed` (after setting them)."""
+
+    demand = Input("level below setpoint")
+    armed = Input("raise while true")
+    overflow = Input("write an out-of-range speed while true", optional=True)
+    valve = Output("fill valve open")
+    pump = Output("pump on")
+    speed = Output("pump speed, %")
+    scans = InOut("scans completed")
+
+    def scan(self) -> None:
+        self.valve = bool(self.demand)
+        self.pump = bool(self.demand)
+        self.speed = 150.0 if self.overflow else 50.0 if self.demand else 0.0
+        if self.armed:
+            raise RuntimeError("level sensor lost")
+        self.scans += 1
+
+
+class EdgeCounter(Program):
+    """Counts rising edges of `part` three ways (R_TRIG, CTU, TP pulses); raises while `armed`."""
+
+    part = Input("photo eye")
+    armed = Input("raise while true")
+    edges = InOut("rising edges seen by R_TRIG")
+    counted = InOut("counts made by a CTU counting part")
+    pulses = InOut("pulses started by a TP")
+    fails_setup = Param(False, "raise in every setup() after the first")
+
+    def setup(self) -> None:
+        self.setups = getattr(self, "setups", 0) + 1
+        if self.fails_setup and self.setups > 1:
+            raise RuntimeError("setup fails")
+        from softplc import CTU, R_TRIG, TP
+
+        self.rising = R_TRIG()
+        self.counter = CTU(PV=1000)
+        self.pulse = TP(self.clock, PT=0.005)
+        self.pulse_edge = R_TRIG()
+        self.last_cv = 0
+
+    def scan(self) -> None:
+        if self.armed:
+            raise RuntimeError("jammed")
+        if self.rising(CLK=self.part):
+            self.edges += 1
+        self.counter(CU=self.part)
+        self.counted += self.counter.CV - self.last_cv
+        self.last_cv = self.counter.CV
+        if self.pulse_edge(CLK=self.pulse(IN=self.part)):
+            self.pulses += 1

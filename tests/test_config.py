@@ -139,9 +139,7 @@ def _summer_config(make_config) -> PlantConfig:
                 program: {PROGRAMS}:Mixer
                 bind: {{source: l1_total, target: l1_scaled}}
                 params: {{recipe: "{{line}}-soup", gain: 2, hold: 250ms}}
-                on_fault: restart
-                restart_delay: 2s
-                max_restarts: 5
+                restart: {{delay: 2s, max: 5}}
                 enabled: false
         """
     )
@@ -156,7 +154,7 @@ def test_for_each_list_bindings_and_params(make_config) -> None:
     # the placeholder is not substituted outside for_each; gain 2 becomes the float the default is
     assert mix.params == {"recipe": "{line}-soup", "gain": 2.0, "hold": 0.25}
     assert isinstance(mix.params["gain"], float)
-    assert (mix.restart.on_fault, mix.restart.delay, mix.restart.max_restarts, mix.enabled) == ("restart", 2.0, 5, False)
+    assert (mix.restart.automatic, mix.restart.delay, mix.restart.max_restarts, mix.enabled) == (True, 2.0, 5, False)
     assert config.program_count == 3
 
 

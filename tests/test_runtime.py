@@ -123,14 +123,12 @@ tasks:
       - name: bomb
         program: {CORE}:Bomb
         bind: {{armed: armed, scans: bomb_scans}}
-        on_fault: ON_FAULT
-        restart_delay: 1s
-        max_restarts: 2
+        restart: RESTART
 """
 
 
 async def test_restart_policy_restarts_after_the_delay_at_most_max_restarts_times(sim_runtime) -> None:
-    runtime = sim_runtime(RESTART.replace("ON_FAULT", "restart"))
+    runtime = sim_runtime(RESTART.replace("RESTART", "{delay: 1s, max: 2}"))
     await runtime.run(duration=5.0)
     bomb = runtime.program("bomb")
     # faulted at 0 s, restarted (setup again) at 1 s and 2 s, faulting again each time; then it stays FAULTED
@@ -140,7 +138,7 @@ async def test_restart_policy_restarts_after_the_delay_at_most_max_restarts_time
 
 
 async def test_restart_policy_stop_stays_faulted(sim_runtime) -> None:
-    runtime = sim_runtime(RESTART.replace("ON_FAULT", "stop"))
+    runtime = sim_runtime(RESTART.replace("RESTART", "never"))
     await runtime.run(duration=5.0)
     bomb = runtime.program("bomb")
     assert bomb.program.setup_times == [0.0]
@@ -148,7 +146,7 @@ async def test_restart_policy_stop_stays_faulted(sim_runtime) -> None:
 
 
 async def test_restart_recovers_when_the_cause_is_gone(sim_runtime) -> None:
-    runtime = sim_runtime(RESTART.replace("ON_FAULT", "restart"))
+    runtime = sim_runtime(RESTART.replace("RESTART", "{delay: 1s, max: 2}"))
     db, clock = runtime.db, runtime.clock
     await runtime.start()
     try:
@@ -426,10 +424,10 @@ async def test_identical_histories_with_client_writes(sim_runtime, tmp_path: Pat
 async def test_a_setup_failing_again_after_a_restart_waits_the_full_delay(sim_runtime) -> None:
     runtime = sim_runtime(
         BROKEN.replace("{name: bad_setup, program: \"" + str(CORE) + ":BadSetup\", bind: {out: out}}",
-                       "{name: bad_setup, program: \"" + str(CORE) + ":BadSetup\", bind: {out: out}, on_fault: restart, max_restarts: 3}")
+                       "{name: bad_setup, program: \"" + str(CORE) + ":BadSetup\", bind: {out: out}, restart: {max: 3}}")
     )
     instance = runtime.program("bad_setup")
-    assert instance.restart.on_fault == "restart"
+    assert instance.restart.automatic and instance.restart.max_restarts == 3
     await runtime.start()
     try:
         await runtime.clock.sleep_until(2.5)

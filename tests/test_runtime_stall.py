@@ -67,7 +67,7 @@ def plant(programs: list[str], **slow: object) -> str:
     entries = {
         "count": f'{{name: count, program: "{CORE}:Counter", bind: {{count: n}}}}',
         "slow": f'{{name: slow, program: "{CORE}:SlowSetup", bind: {{scans: slow_scans}}, params: {{{params}}}, '
-                "on_fault: restart, restart_delay: 100ms, max_restarts: 1}",
+                "restart: {delay: 100ms, max: 1}}",
     }
     listed = "\n".join(f"      - {entries[name]}" for name in programs)
     return f"""
@@ -110,7 +110,7 @@ async def test_a_setup_blocking_in_an_automatic_restart_is_blamed_on_its_own_pro
 
 async def test_a_setup_blocking_in_an_operator_reset_is_watched_and_faults_its_program(real_runtime) -> None:
     """The reset runs setup() from the housekeeping, outside any cycle: still watched, still named."""
-    runtime = real_runtime(plant(["count", "slow"]).replace("on_fault: restart", "on_fault: stop"))
+    runtime = real_runtime(plant(["count", "slow"]).replace("restart: {delay: 100ms, max: 1}", "restart: never"))
     db = runtime.db
     slow = runtime.program("slow")
     await runtime.start()

@@ -12,7 +12,8 @@ from typing import Any
 from softplc.config.findings import Findings
 from softplc.config.outputs import check_outputs
 from softplc.config.plant import PlantConfig
-from softplc.config.programs import ProgramChecker
+from softplc.config.programs import ModuleLoader, ProgramChecker
+from softplc.config.reactions import legacy_problems
 from softplc.config.schema_check import describe, schema_check
 from softplc.config.tags import TagChecker
 from softplc.config.tasks import TaskChecker
@@ -20,11 +21,14 @@ from softplc.sections import config_schema, contributed_tags, section_problems
 from softplc.yamlsource import ConfigError, SourceMap, load_yaml, parse_yaml
 
 
-def load_config(path: str | Path) -> PlantConfig:
-    """Load and check a configuration file; raise ConfigError listing every problem."""
+def load_config(path: str | Path, *, load_module: ModuleLoader | None = None) -> PlantConfig:
+    """Load and check a configuration file; raise ConfigError listing every problem.
+
+    `load_module` loads the program modules (default: the usual, cached import; see `import_program`).
+    """
     path = Path(path)
     data, source = load_yaml(path)
-    return check_config(path, data, source)
+    return check_config(path, data, source, load_module=load_module)
 
 
 def parse_config(text: str, path: str | Path = "<string>") -> PlantConfig:
@@ -33,21 +37,26 @@ def parse_config(text: str, path: str | Path = "<string>") -> PlantConfig:
     return check_config(Path(path), data, source)
 
 
-def check_config(path: Path, data: Any, source: SourceMap) -> PlantConfig:
+def check_config(path: Path, data: Any, source: SourceMap, *, load_module: ModuleLoader | None = None) -> PlantConfig:
     """The checked plant of parsed YAML `data`; raise ConfigError listing every problem."""
     if data is None:
         raise ConfigError([source.problem((), "the file is empty: expected a plant configuration (version, tags, tasks...)")])
     if not isinstance(data, dict):
         raise ConfigError([source.problem((), f"the file must be a mapping of sections, not {describe(data)}")])
     findings = Findings(source)
-    problems, findings.schema_paths = schema_check(data, source, config_schema())
+    # An old form of a key (the restart policy before issue 17) is said once, with what to write
+    # instead, rather than as the schema's "unknown key" or "unknown value".
+    legacy, explained = legacy_problems(data, source)
+    for problem in legacy:
+        findings.add(problem)
+    problems, findings.schema_paths = schema_check(data, source, config_schema(), explained)
     for problem in problems:
         findings.add(problem)
     # The core's checks run on whatever is well-formed, so one pass reports as much as possible;
     # what the schema already reported is not said again.
     tags = TagChecker(findings, path.parent)
     tags.check(data)
-    tasks = TaskChecker(findings, tags, ProgramChecker(findings, tags, path.parent))
+    tasks = TaskChecker(findings, tags, ProgramChecker(findings, tags, path.parent, load_module))
     task_configs = tasks.check(data.get("tasks"))
     check_outputs(findings, tasks.writes, tags.shared_outputs)
     if findings:
@@ -65,6 +74,7 @@ def check_config(path: Path, data: Any, source: SourceMap) -> PlantConfig:
         raw=data,
         source=source,
         tag_paths=dict(tags.tag_paths),
+        shared_outputs=set(tags.shared_outputs),
     )
     config.contributed_tags = contributed_tags(config)
     # The owners of the other sections check what their schema cannot say, on a plant whose

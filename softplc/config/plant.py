@@ -8,7 +8,8 @@ from pathlib import Path
 from typing import Any
 
 from softplc.program import Program
-from softplc.scan import RestartPolicy
+from softplc.fault_reaction import FaultReaction
+from softplc.program_instance import NEVER, RestartPolicy
 from softplc.tags import TagDef
 from softplc.yamlsource import Location, Problem, SourceMap
 
@@ -24,10 +25,12 @@ class ProgramConfig:
     cls: type[Program]
     bindings: dict[str, str | list[str]]
     params: dict[str, Any]
-    restart: RestartPolicy
+    restart: RestartPolicy = NEVER
     enabled: bool = True
     location: Location | None = None  # where the program is named in the file (for errors)
     options: dict[str, Any] = field(default_factory=dict)  # keys owners add to programs (softplc.sections)
+    on_fault: FaultReaction = field(default_factory=FaultReaction)  # what its outputs do when it faults
+    path: tuple[Any, ...] = ()  # its item in the file: ("tasks", TASK, "programs", INDEX)
 
 
 @dataclass
@@ -59,6 +62,8 @@ class PlantConfig:
     tag_paths: dict[str, tuple[Any, ...]] = field(default_factory=dict)
     # Tags the section owners add to the runtime besides the system tags (Section.tags).
     contributed_tags: list[TagDef] = field(default_factory=list)
+    # Tags declared `shared_output: true` (several programs may write them).
+    shared_outputs: set[str] = field(default_factory=set)
 
     @property
     def base_dir(self) -> Path:

@@ -6,8 +6,11 @@ import importlib
 import importlib.util
 import inspect
 import sys
+import traceback
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 from softplc.config.findings import Findings
@@ -30,14 +33,15 @@ class Write:
 class ProgramChecker:
     """Checks the `program:`, `bind:` and `params:` of the programs of every task."""
 
-    def __init__(self, findings: Findings, tags: TagChecker, base_dir: Path) -> None:
+    def __init__(self, findings: Findings, tags: TagChecker, base_dir: Path, load_module: ModuleLoader | None = None) -> None:
         self.findings = findings
         self.tags = tags
         self.base_dir = base_dir
+        self.load_module = load_module
 
     def import_class(self, reference: str, path: tuple[Any, ...]) -> type[Program] | None:
         try:
-            return import_program(reference, self.base_dir)
+            return import_program(reference, self.base_dir, self.load_module)
         except ImportError as error:
             self.findings.problem(path, str(error))
             return None
@@ -129,31 +133,30 @@ def substitute(text: str, substitution: dict[str, str]) -> str:
     return text
 
 
-def import_program(reference: str, base_dir: Path) -> type[Program]:
-    """Resolve `module:Class`, `module.Class` or `file.py:Class` to a Program subclass.
+ModuleLoader = Callable[[str, Path], ModuleType]
 
-    `base_dir` (the configuration's folder) is importable, so `programs.x:Y` finds the
-    plant's own `programs/` folder.
-    """
+
+def split_reference(reference: str) -> tuple[str, str]:
+    """(module, class) of `module:Class`, `module.Class` or `file.py:Class`; raise ImportError if neither."""
     if ":" in reference:
         module_name, _, class_name = reference.rpartition(":")
     else:
         module_name, _, class_name = reference.rpartition(".")
     if not module_name or not class_name:
         raise ImportError(f"cannot load program '{reference}': write module:Class, e.g. programs.plant:PlantSimulator")
+    return module_name, class_name
+
+
+def import_program(reference: str, base_dir: Path, load_module: ModuleLoader | None = None) -> type[Program]:
+    """Resolve `module:Class`, `module.Class` or `file.py:Class` to a Program subclass.
+
+    `base_dir` (the configuration's folder) is importable, so `programs.x:Y` finds the
+    plant's own `programs/` folder. `load_module(name, base_dir)` loads the module (default: the
+    usual import, from the module cache; an online change loads fresh ones, `softplc.config.fresh`).
+    """
+    module_name, class_name = split_reference(reference)
     try:
-        if module_name.endswith(".py"):
-            file = (base_dir / module_name).resolve()
-            spec = importlib.util.spec_from_file_location(f"softplc_user_{file.stem}", file)
-            if spec is None or spec.loader is None or not file.exists():
-                raise ImportError(f"no such file {file}")
-            module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
-        else:
-            base = str(base_dir.resolve())
-            if base not in sys.path:
-                sys.path.insert(0, base)
-            module = importlib.import_module(module_name)
+        module = (load_module or cached_module)(module_name, base_dir)
     except ModuleNotFoundError as error:
         missing = error.name or ""
         if module_name == missing or module_name.startswith(missing + "."):
@@ -161,8 +164,10 @@ def import_program(reference: str, base_dir: Path) -> type[Program]:
             raise ImportError(f"cannot load program '{reference}': no module named '{missing}' in {where}") from None
         # The program's module exists, but something it imports does not.
         raise ImportError(f"cannot load program '{reference}': module {module_name} imports '{missing}', which is not installed") from None
+    except SyntaxError as error:  # its message names the file and line already
+        raise ImportError(f"cannot load program '{reference}': SyntaxError: {error}") from None
     except Exception as error:  # user code may raise anything while importing
-        raise ImportError(f"cannot load program '{reference}': {type(error).__name__}: {error}") from None
+        raise ImportError(f"cannot load program '{reference}': {type(error).__name__}: {error}{raised_at(error)}") from None
     cls = getattr(module, class_name, None)
     if cls is None:
         names = [n for n, v in vars(module).items() if inspect.isclass(v) and issubclass(v, Program) and v is not Program]
@@ -170,3 +175,30 @@ def import_program(reference: str, base_dir: Path) -> type[Program]:
     if not (inspect.isclass(cls) and issubclass(cls, Program)):
         raise ImportError(f"cannot load program '{reference}': {class_name} is not a softplc Program subclass")
     return cls
+
+
+def cached_module(module_name: str, base_dir: Path) -> ModuleType:
+    """The module as Python imports it (from sys.modules when already imported); a `.py` file is loaded anew."""
+    if module_name.endswith(".py"):
+        file = (base_dir / module_name).resolve()
+        spec = importlib.util.spec_from_file_location(f"softplc_user_{file.stem}", file)
+        if spec is None or spec.loader is None or not file.exists():
+            raise ImportError(f"no such file {file}")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+    importable(base_dir)
+    return importlib.import_module(module_name)
+
+
+def importable(base_dir: Path) -> None:
+    """Make the configuration's folder importable (`programs.x:Y` finds its `programs/`)."""
+    base = str(base_dir.resolve())
+    if base not in sys.path:
+        sys.path.insert(0, base)
+
+
+def raised_at(error: BaseException) -> str:
+    """' at FILE:LINE' of the innermost frame of a traceback (where user code raised), or ''."""
+    frames = traceback.extract_tb(error.__traceback__)
+    return f" at {frames[-1].filename}:{frames[-1].lineno}" if frames else ""

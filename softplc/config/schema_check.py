@@ -36,10 +36,17 @@ def schema_problems(data: Any, source: SourceMap, schema: dict[str, Any]) -> lis
     return schema_check(data, source, schema)[0]
 
 
-def schema_check(data: Any, source: SourceMap, schema: dict[str, Any]) -> tuple[list[Problem], set[tuple[Any, ...]]]:
-    """The schema's problems, and the paths they are about (semantic checks skip those)."""
+def schema_check(
+    data: Any, source: SourceMap, schema: dict[str, Any], explained: set[tuple[Any, ...]] | None = None,
+) -> tuple[list[Problem], set[tuple[Any, ...]]]:
+    """The schema's problems, and the paths they are about (semantic checks skip those).
+
+    `explained`: paths another check has already reported better (an old form of a key, with what
+    to write instead); the schema says nothing at or below them.
+    """
     import jsonschema  # ~60 ms to import: only commands that load a configuration pay for it
 
+    explained = explained or set()
     validator = jsonschema.Draft202012Validator(schema)
     problems: list[Problem] = []
     paths: set[tuple[Any, ...]] = set()
@@ -47,16 +54,21 @@ def schema_check(data: Any, source: SourceMap, schema: dict[str, Any]) -> tuple[
         path = tuple(error.absolute_path)
         if "propertyNames" in error.absolute_schema_path:
             path = (*path, error.instance)  # the error is about a key: point at that key
+        if any(path[: len(done)] == done for done in explained):
+            continue
         if error.validator == "additionalProperties" and isinstance(error.instance, dict):
             known = error.schema.get("properties", {})
-            paths.update((*path, key) for key in error.instance if key not in known)
+            unknown = [key for key in error.instance if key not in known and (*path, key) not in explained]
+            if not unknown:
+                continue
+            paths.update((*path, key) for key in unknown)
         else:
             paths.add(path)
-        problems.extend(_translate(error, path, source))
+        problems.extend(_translate(error, path, source, explained))
     return problems, paths
 
 
-def _translate(error: jsonschema.ValidationError, path: tuple[Any, ...], source: SourceMap) -> list[Problem]:
+def _translate(error: jsonschema.ValidationError, path: tuple[Any, ...], source: SourceMap, explained: set[tuple[Any, ...]]) -> list[Problem]:
     kind = error.validator
     if not path:
         where = "the file"
@@ -66,7 +78,7 @@ def _translate(error: jsonschema.ValidationError, path: tuple[Any, ...], source:
         where = f"'{path[-1]}'"
     if kind == "additionalProperties":
         known = list(error.schema.get("properties", {}))
-        unknown = [key for key in error.instance if key not in known]
+        unknown = [key for key in error.instance if key not in known and (*path, key) not in explained]
         problems = []
         for key in unknown:
             hint = did_you_mean(key, known)

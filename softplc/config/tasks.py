@@ -1,4 +1,4 @@
-"""Tasks and the programs they scan: intervals, watchdogs, priorities, `for_each` and restart policies."""
+"""Tasks and the programs they scan: intervals, watchdogs, priorities, `for_each`, fault reactions and restart policies."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from typing import Any
 from softplc.config.findings import Findings
 from softplc.config.plant import ProgramConfig, TaskConfig
 from softplc.config.programs import ProgramChecker, Write, substitute
+from softplc.config.reactions import fault_reaction, restart_policy
 from softplc.config.tags import TagChecker
 from softplc.durations import check_duration
-from softplc.scan import RestartPolicy
 from softplc.sections import program_keys
 from softplc.suggest import did_you_mean
 
@@ -90,11 +90,7 @@ class TaskChecker:
         if for_each is not None and "{" + for_each + "}" not in spec["name"]:
             self.findings.problem((*path, "name"), f"with for_each: {for_each}, the name must contain {{{for_each}}} so each instance is unique")
             return []
-        restart = RestartPolicy(
-            on_fault=spec.get("on_fault", "stop") if spec.get("on_fault") in ("stop", "restart") else "stop",
-            delay=(self._duration(spec["restart_delay"], (*path, "restart_delay"), "restart_delay") or 1.0) if "restart_delay" in spec else 1.0,
-            max_restarts=spec.get("max_restarts", 3) if isinstance(spec.get("max_restarts", 3), int) else 3,
-        )
+        restart = restart_policy(self.findings, spec, path)
         location = self.findings.source.value((*path, "program"))
         options = {key: spec[key] for key in program_keys() if key in spec}
         results = []
@@ -105,6 +101,10 @@ class TaskChecker:
             params = self.programs.params(cls, spec.get("params") or {}, substitution, path, name, instance)
             if cls is None or bindings is None or params is None:
                 continue
-            program = ProgramConfig(name, spec["program"], cls, bindings, params, restart, bool(spec.get("enabled", True)), location, dict(options))
+            reaction = fault_reaction(self.findings, self.tags, spec, path, name, substitution, writes, instance)
+            if reaction is None:
+                continue
+            program = ProgramConfig(name, spec["program"], cls, bindings, params, restart, bool(spec.get("enabled", True)), location,
+                                    dict(options), reaction, path)
             results.append((program, writes))
         return results

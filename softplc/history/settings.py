@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from softplc.durations import parse_duration
 from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, storage_problems
 from softplc.yamlsource import Location, Problem
 

@@ -17,7 +17,7 @@ from asyncua import Client, Node, ua
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 
 from softplc.latency.certificate import MODES, Security, application_uri
-from softplc.latency.driver import REQUIRED_ROLES, TAG_NAMES, Driver, DriverError, PollingDriver, ReadyTracker, Snapshot
+from softplc.latency.driver import REQUIRED_ROLES, TAG_NAMES, DriverError, PollingDriver, ReadyTracker, Snapshot
 
 log = logging.getLogger(__name__)
 

@@ -16,7 +16,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from softplc.storage.database import Database, StorageError, driver_errors
+from softplc.storage.database import Database, StorageError
 
 log = logging.getLogger(__name__)
 

@@ -1,0 +1,86 @@
+"""`softplc apply` against a running runtime over OPC UA (a real server, the command in its own process).
+
+It calls `programs.apply` through the OPC UA door to the runtime's commands (softplc/opcua/commands.py).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import sys
+import textwrap
+import uuid
+from pathlib import Path
+
+
+
+from opcua_support import PASSWORDS, running_plant  # noqa: E402
+
+from conftest import REPO  # noqa: E402
+
+PROGRAM = '''
+from softplc import InOut, Output, Program
+
+
+class Stamp(Program):
+    count = InOut("scans")
+    version = Output("code version")
+
+    def setup(self):
+        self.scans = 0
+
+    def scan(self):
+        self.scans += 1
+        self.count += 1
+        self.version = 1
+'''
+
+PLANT = """
+version: 1
+tags:
+  count: {type: uint32}
+  version: {type: uint16}
+tasks:
+  fast:
+    interval: 10ms
+    programs:
+      - {name: stamp, program: "MODULE:Stamp", bind: {count: count, version: version}}
+"""
+
+
+async def softplc(*args: str, password: str | None = None) -> tuple[int, str, str]:
+    """`softplc ARGS` in a process of its own, the password on its stdin; (exit status, stdout, stderr)."""
+    process = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "softplc.cli", *args, stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
+    out, err = await asyncio.wait_for(process.communicate(f"{password or ''}\n".encode()), 60)
+    return process.returncode or 0, out.decode(), err.decode()
+
+
+async def test_softplc_apply_changes_a_running_program_and_refuses_a_broken_change(tmp_path: Path) -> None:
+    module = f"cli_{uuid.uuid4().hex[:10]}"
+    source = tmp_path / f"{module}.py"
+    source.write_text(textwrap.dedent(PROGRAM))
+    async with running_plant(tmp_path, PLANT.replace("MODULE", module)) as (runtime, server):
+        login = ["--endpoint", server.endpoint, "--user", "engineer", "--password-stdin", str(tmp_path / "tagdb.yaml")]
+        source.write_text(source.read_text().replace("self.version = 1", "self.version = 2"))
+        status, out, err = await softplc("apply", "--check", *login, password=PASSWORDS["engineer"])
+        assert (status, err) == (0, "") and f"program stamp: code of {module} changed" in out and "checked, not applied" in out
+        assert runtime.program("stamp").version == 1
+        status, out, err = await softplc("apply", *login, password=PASSWORDS["engineer"])
+        assert status == 0, err
+        assert out.splitlines() == ["online change 1 applied: stamp", f"  program stamp: code of {module} changed",
+                                    "  program stamp: new version RUNNING, state carried over: scans"]
+        assert runtime.program("stamp").version == 2
+        # a broken module: the runtime's located problem, exit 2, nothing applied
+        source.write_text(source.read_text().replace("self.version = 2", "self.version = = 3"))
+        status, out, err = await softplc("apply", *login, password=PASSWORDS["engineer"])
+        assert status == 2 and out == ""
+        assert err.startswith("online change refused, nothing applied: 1 problem(s):\n")
+        assert f"tagdb.yaml:10:" in err and f"SyntaxError: invalid syntax ({module}.py, line" in err
+        assert runtime.program("stamp").version == 2
+        # an operator may not: exit 4
+        status, out, err = await softplc("apply", "--endpoint", server.endpoint, "--user", "operator", "--password-stdin",
+                                         str(tmp_path / "tagdb.yaml"), password=PASSWORDS["operator"])
+        assert status == 4 and "user operator may not apply online changes" in err
