@@ -368,7 +368,7 @@ def test_without_a_servers_section_both_servers_run_on_loopback_default_ports(pl
     from softplc.cli import build_parser
 
     adapters = {a.name: a for a in build_adapters(load_config(plant), build_parser().parse_args(["run", str(plant)]))}
-    assert set(adapters) == {"opcua", "modbus"}
+    assert set(adapters) == {"audit", "opcua", "modbus"}
     assert adapters["opcua"].settings.endpoint == "opc.tcp://127.0.0.1:4840/softplc/"
     assert (adapters["modbus"].settings.host, adapters["modbus"].settings.port) == ("127.0.0.1", 5020)
 
@@ -376,7 +376,7 @@ def test_without_a_servers_section_both_servers_run_on_loopback_default_ports(pl
 def test_run_says_which_servers_are_off_and_how_to_turn_them_on(cli, tmp_path: Path) -> None:
     plant = tmp_path / "plant.yaml"
     plant.write_text(PLANT + "servers:\n  opcua: {enabled: false}\n  modbus: {enabled: false}\n")
-    code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path)
+    code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path, "--no-audit")
     assert code == 0, err
     lines = err.splitlines()
     assert lines[1:5] == [
@@ -388,7 +388,8 @@ def test_run_says_which_servers_are_off_and_how_to_turn_them_on(cli, tmp_path: P
     code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path, "--no-servers", "--modbus-port", "0")
     assert "not serving: OPC UA and Modbus TCP (--no-servers): run without it to serve them" in err.splitlines()
     code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path, "--modbus-port", "0")
-    assert [line for line in err.splitlines() if line.startswith(("serving:", "not serving:"))][1:] == [
+    assert err.splitlines()[1].startswith("serving: audit trail: every client write and command to SQLite ")  # on by default
+    assert [line for line in err.splitlines() if line.startswith(("serving:", "not serving:"))][2:] == [
         "not serving: OPC UA (servers.opcua.enabled: false in plant.yaml): set enabled: true to serve it"]
 
 
@@ -407,7 +408,7 @@ def test_under_sim_servers_bind_free_ports_unless_a_flag_says_otherwise(plant: P
     assert bound("--sim", "--modbus-port", "1502", "--opcua-endpoint", "opc.tcp://127.0.0.1:4841/x/") == ("opc.tcp://127.0.0.1:4841/x/", 1502)
     off = plant.with_name("off.yaml")
     off.write_text(PLANT + "servers:\n  modbus: {enabled: false}\n")
-    assert [a.name for a in build_adapters(load_config(off), parser.parse_args(["run", str(off), "--sim"]))] == ["opcua"]
+    assert [a.name for a in build_adapters(load_config(off), parser.parse_args(["run", str(off), "--sim"]))] == ["audit", "opcua"]
 
 
 def test_a_simulation_beside_a_running_plant_starts_and_serves(cli, tmp_path: Path) -> None:
@@ -422,7 +423,7 @@ def test_a_simulation_beside_a_running_plant_starts_and_serves(cli, tmp_path: Pa
         plant = tmp_path / "same_ports.yaml"
         plant.write_text(PLANT + f"servers:\n  opcua: {{endpoint: 'opc.tcp://127.0.0.1:{opcua_port}/softplc/'}}\n"
                          f"  modbus: {{port: {modbus_port}}}\n")
-        code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path / "sim")
+        code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path / "sim", "--no-audit")
         assert code == 0, err
         served = [line for line in err.splitlines() if line.startswith("serving: ")]
         assert len(served) == 2 and f":{opcua_port}/" not in served[0] and f":{modbus_port} " not in served[1], served

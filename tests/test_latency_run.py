@@ -176,7 +176,7 @@ async def _serve_handshake(tmp_path: Path, protocol: str) -> tuple[Runtime, str]
     for adapter in build_adapters(config, None):
         runtime.add_adapter(adapter)
     await runtime.start()
-    server: Any = runtime.adapters[0]
+    server: Any = next(adapter for adapter in runtime.adapters if adapter.name == protocol)
     return runtime, server.endpoint if protocol == "opcua" else f"127.0.0.1:{server.port}"
 
 
