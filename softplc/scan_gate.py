@@ -56,6 +56,24 @@ class ScanGate:
             sys.setprofile(None)
             self._watching = False
 
+    @contextlib.contextmanager
+    def stepping(self) -> Iterator[Callable[[], None]]:
+        """Like `worker()`, for work done in small steps that calls the yielded `step()` between them.
+
+        No profile hook, so no cost on every call: the work (e.g. the audit trail's writer,
+        softplc/audit/store.py) keeps each step well under the margin (2 ms) itself.
+        """
+        self._open_until = 0.0
+        self._watching = True
+        try:
+            yield self.step
+        finally:
+            self._watching = False
+
+    def step(self) -> None:
+        """Between two steps of `stepping()` work: return at once, or wait until the cycle now due has run."""
+        self._event(None, "step", None)  # type: ignore[arg-type]
+
     def _margin(self) -> float:
         # The real clock wakes the scan up to its (adaptive) spin margin early and spins: step aside before.
         return max(MARGIN, getattr(self.clock, "spin", 0.0) + 0.001)

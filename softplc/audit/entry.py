@@ -8,6 +8,7 @@ storage writer's thread, so the loop never encodes a value.
 from __future__ import annotations
 
 import json
+import json.encoder
 import math
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
@@ -17,6 +18,7 @@ from softplc.commands import CommandCall
 from softplc.tagdb import WriteEvent
 
 MAX_TEXT = 4096  # longest value, argument list or detail kept (a client may send megabytes)
+_string = json.encoder.encode_basestring  # a str as JSON text, in C (as json.dumps(..., ensure_ascii=False))
 WRITE, COMMAND = "write", "command"
 
 
@@ -90,7 +92,19 @@ def entry_of(row: tuple[Any, ...]) -> AuditEntry:
 
 def encode(value: Any) -> str | None:
     """A value as JSON text (None stays NULL); anything a client sent is kept as text, clipped."""
-    if value is None:
+    # Tag values first, without json.dumps (a third of a row's cost at 10,000 entries a second).
+    kind = type(value)
+    if kind is int:
+        return int.__repr__(value)
+    if kind is float:
+        if value - value == 0.0:  # finite (JSON has no inf or NaN: those take the long way)
+            return float.__repr__(value)
+    elif kind is bool:
+        return "true" if value else "false"
+    elif kind is str:
+        if len(value) <= MAX_TEXT:
+            return _string(value)
+    elif value is None:
         return None
     try:
         text = json.dumps(value, ensure_ascii=False, default=str, allow_nan=True)

@@ -27,6 +27,7 @@ from softplc.audit.store import SINK_NAME, AuditSink
 from softplc.clock import Clock
 from softplc.commands import CommandCall, Commands
 from softplc.realtime import SWITCH_INTERVAL
+from softplc.scan_gate import ScanGate
 from softplc.storage import BatchWriter, Database, StorageSettings
 from softplc.tagdb import TagDatabase, WriteEvent
 
@@ -51,6 +52,8 @@ class AuditRecorder:
         self.database: Database | None = None
         self.writer: BatchWriter | None = None
         self.recorded = 0
+        self.gate: ScanGate | None = None
+        self._sink: AuditSink | None = None
         self._db: TagDatabase | None = None
         self._commands: Commands | None = None
         self._simulated = False
@@ -73,7 +76,11 @@ class AuditRecorder:
                     raise AdapterError(f"audit: cannot open SQLite {storage.path}: {error}") from None
         self.database = database = Database(storage)
         writer = BatchWriter(database, name="softplc-audit-writer", max_pending=MAX_PENDING)
-        writer.register(AuditSink(self.plant, partition=self.settings.partition, retention=self.settings.retention, now=runtime.clock.wall))
+        # On the real clock the writer steps aside while a scan cycle is due (softplc/scan_gate.py).
+        self.gate = gate = ScanGate(runtime.engine, runtime.clock) if not simulated and runtime.tasks else None
+        self._sink = AuditSink(self.plant, partition=self.settings.partition, retention=self.settings.retention, now=runtime.clock.wall,
+                               steps=gate.stepping if gate is not None else None)
+        writer.register(self._sink)
         # The writer thread runs Python code (rows, JSON) between its SQL calls; with the
         # interpreter's default 5 ms switch interval it could keep the event loop waiting for
         # the GIL that long, i.e. a late 10 ms scan (as for the historian).
@@ -101,6 +108,8 @@ class AuditRecorder:
                 pass
         self._undo.clear()
         writer, self.writer = self.writer, None
+        if self._sink is not None:
+            self._sink.stepping = False  # the scan has stopped (adapters stop after it): write the rest at once
         if writer is not None:
             assert self._clock is not None
             await self._clock.run_blocking(writer.stop)
