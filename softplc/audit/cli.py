@@ -267,4 +267,5 @@ def _what(row: dict[str, Any]) -> str:
 def _result(row: dict[str, Any]) -> str:
     if row["accepted"]:
         return "accepted"
-    return f"refused: {row['rule']}: {row['detail']}" if row["detail"] else f"refused: {row['rule']}"
+    rule = "" if row["rule"] == "refused" else f"{row['rule']}: "  # a command's own reason says it all
+    return f"refused: {rule}{row['detail']}" if row["detail"] else f"refused: {row['rule']}"
