@@ -15,6 +15,11 @@
   (BadUserAccessDenied), without asyncua's error line.
 - asyncua ignores RequestedMaxReferencesPerNode and has no BrowseNext: Browse and BrowseNext
   are served here with continuation points (browsing.py).
+- The session's user learns the client's address once its session is activated (writes carry
+  it in their `Origin`, for the audit trail).
+- A session whose connection is lost keeps its subscriptions until it times out (asyncua, Part
+  4: the client may come back with ActivateSession on a new connection); they go dormant at
+  once, so a vanished client costs no work per tag change meanwhile (subscriptions.py).
 """
 
 from __future__ import annotations
@@ -29,7 +34,11 @@ from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua.ua_binary import struct_from_binary
 from cryptography import x509
 
+from asyncua.server.internal_session import SessionState
+
 from softplc.opcua.browsing import ContinuationPoints
+from softplc.opcua.roles import SessionUser
+from softplc.opcua.subscriptions import GuardedSubscriptionService
 from softplc.peers import peer_host
 
 
@@ -101,7 +110,17 @@ class GuardedProcessor(UaProcessor):
             return True
         if typeid == _BROWSE or typeid == _BROWSE_NEXT:
             return await self._browse(typeid, requesthdr, seqhdr, body)
-        return await super()._process_message(typeid, requesthdr, seqhdr, body)
+        answered = await super()._process_message(typeid, requesthdr, seqhdr, body)
+        if typeid == _ACTIVATE_SESSION and self.session is not None and isinstance(self.session.user, SessionUser):
+            self.session.user.peer = peer_host(self.name)
+        return answered
+
+    async def close(self) -> None:
+        await super().close()
+        session = self.session
+        service = self.iserver.subscription_service
+        if session is not None and session.state != SessionState.Closed and isinstance(service, GuardedSubscriptionService):
+            service.put_to_sleep(session.session_id)  # kept for a comeback, but no work per change meanwhile
 
     async def _browse(self, typeid: ua.NodeId, requesthdr: Any, seqhdr: Any, body: Buffer) -> bool:
         """Browse and BrowseNext with continuation points (asyncua ignores RequestedMaxReferencesPerNode)."""
