@@ -15,7 +15,7 @@ vanishing until the server has dropped every one of their subscriptions, or --li
 after (--after seconds more). Per phase: the 10 ms task's start latency p50 / p99 / max, its
 cycles more than 5 ms late and how many of them coincide with a stall of an independent
 process that wakes every 1 ms (the machine stalled, not softplc; see bench/stall_probe.py),
-and this process's resident memory at the phase's end.
+this process's CPU use, and its resident memory and asyncio tasks at the phase's end.
 
 Goal (issue 14): with 100 vanished clients the 10 ms task's start latency stays within the
 scan goal (p99 <= 1 ms, max <= 5 ms) while they linger and after.
@@ -23,6 +23,7 @@ scan goal (p99 <= 1 ms, max <= 5 ms) while they linger and after.
     .venv/bin/python bench/opcua_orphans.py                         # 100 clients, killed
     .venv/bin/python bench/opcua_orphans.py --vanish freeze
     .venv/bin/python bench/opcua_orphans.py --clients 20 --after 10 # a quick look
+    .venv/bin/python bench/opcua_orphans.py --rt-priority 10        # as softplc run --rt-priority 10
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))
 
+from opcua_common import on_publish  # noqa: E402
 from scan_jitter import GOAL_MAX_MS, GOAL_P99_MS, _plant  # noqa: E402
 from timing import load_average  # noqa: E402
 
@@ -62,21 +64,16 @@ async def _clients(endpoint: str, tags_file: Path, count: int) -> None:
     logging.getLogger("asyncua").setLevel(logging.CRITICAL)
     names = json.loads(tags_file.read_text())
     first: set[int] = set()
-
-    class Handler:
-        def __init__(self, index: int) -> None:
-            self.index = index
-
-        def datachange_notification(self, node, value, data) -> None:
-            first.add(self.index)
-
     clients = []
     for index in range(count):
         client = Client(endpoint, timeout=30)
         client.session_timeout = 3_600_000  # ask for an hour, as many clients do; the server revises it
         await client.connect()
         ns = await client.get_namespace_index("urn:softplc:tags")
-        subscription = await client.create_subscription(PUBLISHING_MS, Handler(index))
+        subscription = await client.create_subscription(PUBLISHING_MS, None)
+        # Notifications counted straight from the PublishResponses: asyncua's handler path (a task
+        # per notification) would make 100 sessions saturate this process, not the server.
+        on_publish(client, subscription, lambda _, index=index: first.add(index))
         await subscription.subscribe_data_change([client.get_node(ua.NodeId(name, ns)) for name in names])  # queuesize 0
         clients.append(client)
     deadline = time.monotonic() + 60
@@ -113,6 +110,11 @@ class Recorder:
         self.samples: dict[str, array] = {phase: array("d") for phase in PHASES}
         self.late: dict[str, list[tuple[float, float]]] = {phase: [] for phase in PHASES}  # (monotonic, ms) > 5 ms
         self.rss_mb: dict[str, float] = {}
+        self.cpu_s: dict[str, float] = {}  # CPU seconds this process used during the phase
+        self.tasks: dict[str, int] = {}  # asyncio tasks alive at the phase's end
+        self.seconds: dict[str, float] = {}
+        self._started = (0.0, 0.0)
+        self.started: dict[str, float] = {}  # monotonic time each phase began
         self.stalls: list[tuple[float, float]] = []  # the probe's (monotonic, ms)
 
     def witnessed(self, phase: str) -> int:
@@ -120,7 +122,8 @@ class Recorder:
         return sum(any(t - ms / 1e3 - 0.005 <= pt <= t + 0.05 for pt, _ in self.stalls) for t, ms in self.late[phase])
 
     async def watch(self) -> None:
-        process = await asyncio.create_subprocess_exec(sys.executable, "-c", PROBE, stdout=asyncio.subprocess.PIPE)
+        process = await asyncio.create_subprocess_exec(sys.executable, "-c", PROBE, stdout=asyncio.subprocess.PIPE,
+                                                       preexec_fn=_normal_scheduling)
         assert process.stdout is not None
         try:
             while line := await process.stdout.readline():
@@ -144,10 +147,23 @@ class Recorder:
 
         task.record = recording
 
+    def begin(self, phase: str) -> None:
+        self.phase = phase
+        self._started = (time.monotonic(), time.process_time())
+        self.started[phase] = self._started[0]
+
     def end_phase(self) -> None:
         if self.phase is not None:
             self.rss_mb[self.phase] = _rss_mb()
+            self.seconds[self.phase] = time.monotonic() - self._started[0]
+            self.cpu_s[self.phase] = time.process_time() - self._started[1]
+            self.tasks[self.phase] = len(asyncio.all_tasks())
         self.phase = None
+
+
+def _normal_scheduling() -> None:
+    """In a child process: ordinary scheduling, whatever this process runs at (--rt-priority)."""
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
 def _rss_mb() -> float:
@@ -173,8 +189,11 @@ async def _measure(args: argparse.Namespace) -> tuple[Recorder, dict[str, float]
     from softplc.cli import build_parser
     from softplc.clock import RealClock
     from softplc.opcua import OpcUaServer
+    from softplc.realtime import use_normal_priority_executor
     from softplc.runtime import Runtime
 
+    if args.rt_priority is not None:
+        use_normal_priority_executor(asyncio.get_running_loop())
     config = _plant(args.config, 0.010)
     state_dir = Path(tempfile.mkdtemp(prefix="softplc-orphans-"))
     runtime = Runtime(config, RealClock(), state_dir=state_dir)
@@ -196,21 +215,21 @@ async def _measure(args: argparse.Namespace) -> tuple[Recorder, dict[str, float]
     process = None
     try:
         await runtime.clock.sleep(2.0)  # servers settle, first plans are made
-        recorder.phase = "baseline"
+        recorder.begin("baseline")
         await runtime.clock.sleep(args.baseline)
         recorder.end_phase()
-        recorder.phase = "connect"
+        recorder.begin("connect")
         started = time.monotonic()
         process = await asyncio.create_subprocess_exec(
             sys.executable, str(Path(__file__).resolve()), "--clients", str(args.clients), "--endpoint", server.endpoint,
-            "--tags-file", str(tags_file), stdout=asyncio.subprocess.PIPE, cwd=str(REPO))
+            "--tags-file", str(tags_file), stdout=asyncio.subprocess.PIPE, cwd=str(REPO), preexec_fn=_normal_scheduling)
         ready = await _wait_line(process, "READY", 600)
         notes["connect_s"] = time.monotonic() - started
         notes["ready"] = float(ready.split()[1])
         notes["subscriptions"] = float(len(subscriptions))
         notes["monitored_items"] = float(sum(len(s.monitored_item_srv._monitored_items) for s in subscriptions.values()))
         recorder.end_phase()
-        recorder.phase = "linger"
+        recorder.begin("linger")
         started = time.monotonic()
         process.send_signal(signal.SIGKILL if args.vanish == "kill" else signal.SIGSTOP)
         while subscriptions and time.monotonic() - started < args.linger:
@@ -218,7 +237,7 @@ async def _measure(args: argparse.Namespace) -> tuple[Recorder, dict[str, float]
         notes["linger_s"] = time.monotonic() - started
         notes["left"] = float(len(subscriptions))
         recorder.end_phase()
-        recorder.phase = "after"
+        recorder.begin("after")
         await runtime.clock.sleep(args.after)
         recorder.end_phase()
     finally:
@@ -238,6 +257,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline", type=float, default=10.0, help="seconds measured before any client (default 10)")
     parser.add_argument("--linger", type=float, default=120.0, help="most seconds to wait for the server to drop them (default 120)")
     parser.add_argument("--after", type=float, default=20.0, help="seconds measured after that (default 20)")
+    parser.add_argument("--rt-priority", type=int, metavar="N", help="SCHED_FIFO priority, as softplc run --rt-priority "
+                        "(the clients and the stall probe keep ordinary scheduling)")
     parser.add_argument("--endpoint", help=argparse.SUPPRESS)  # the client process
     parser.add_argument("--tags-file", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -245,26 +266,39 @@ def main(argv: list[str] | None = None) -> int:
         asyncio.run(_clients(args.endpoint, args.tags_file, args.clients))
         return 0
     logging.basicConfig(level=logging.ERROR)
+    if args.rt_priority is not None:
+        from softplc.realtime import set_realtime_priority
+
+        set_realtime_priority(args.rt_priority)
+    mode = f"SCHED_FIFO priority {args.rt_priority}" if args.rt_priority is not None else "normal scheduling"
     print(f"orphaned OPC UA sessions: {args.clients} clients subscribe to every tag ({PUBLISHING_MS} ms, queue size 0) "
-          f"and vanish ({args.vanish}); load average before: {load_average()}", flush=True)
+          f"and vanish ({args.vanish}); {mode}; load average before: {load_average()}", flush=True)
     recorder, notes = asyncio.run(_measure(args))
     print(f"  connect: {notes.get('connect_s', float('nan')):.1f} s, {notes.get('ready', 0):.0f} sessions with data, "
           f"{notes.get('subscriptions', 0):.0f} subscriptions, {notes.get('monitored_items', 0):.0f} monitored items")
     print(f"  linger: {notes.get('linger_s', float('nan')):.1f} s until the server dropped them "
           f"({notes.get('left', 0):.0f} subscriptions left); load average after: {load_average()}")
     print()
-    print("| phase | cycles | start latency ms p50 / p99 / max | cycles > 5 ms late (machine stalled too) | RSS MB at end |")
-    print("|---|---|---|---|---|")
+    print("| phase | s | cycles | start latency ms p50 / p99 / max | cycles > 5 ms late (machine stalled too) | CPU % | RSS MB at end | tasks |")
+    print("|---|---|---|---|---|---|---|---|")
     missed = []
     for phase in PHASES:
         samples = np.frombuffer(recorder.samples[phase]) if len(recorder.samples[phase]) else np.array([float("nan")])
         p50, p99 = np.percentile(samples, [50, 99])
         worst = float(samples.max())
         late = f"{len(recorder.late[phase])} ({recorder.witnessed(phase)})"
-        print(f"| {phase} | {len(recorder.samples[phase])} | {p50:.3f} / {p99:.3f} / {worst:.3f} | {late} | "
-              f"{recorder.rss_mb.get(phase, float('nan')):.0f} |")
+        seconds = recorder.seconds.get(phase, float("nan"))
+        cpu = 100 * recorder.cpu_s.get(phase, float("nan")) / seconds
+        print(f"| {phase} | {seconds:.0f} | {len(recorder.samples[phase])} | {p50:.3f} / {p99:.3f} / {worst:.3f} | {late} | "
+              f"{cpu:.0f} | {recorder.rss_mb.get(phase, float('nan')):.0f} | {recorder.tasks.get(phase, 0)} |")
         if phase in ("linger", "after") and not (p99 <= GOAL_P99_MS and worst <= GOAL_MAX_MS):
             missed.append(f"{phase}: p99 {p99:.3f} ms, max {worst:.3f} ms")
+    print()
+    for phase in PHASES:
+        if recorder.late[phase]:
+            start = recorder.started[phase]
+            shown = ", ".join(f"{t - start:.1f} s: {ms:.1f} ms" for t, ms in recorder.late[phase][:12])
+            print(f"  late cycles in {phase} (time into the phase: lateness): {shown}")
     print()
     for miss in missed:
         print(f"!!! GOAL MISSED !!! 10 ms task start latency while the clients {miss} (goal p99 <= {GOAL_P99_MS} ms, max <= {GOAL_MAX_MS} ms)")

@@ -125,9 +125,9 @@ async def test_nobody_writes_the_diagnostic_tags_but_the_commands_still_work(tmp
                 async with client_for(server, user) as client:
                     node = client.get_node(server.node_id("_sys.reset_faults"))
                     assert (await node.read_attribute(ua.AttributeIds.UserAccessLevel)).Value.Value == 3
+                    done = len(executed)
                     results = await client.write_values([node], [ua.Variant(True, ua.VariantType.Boolean)])
                     assert results[0].is_good()
-                    done = len(executed)
                     await wait_until(lambda done=done: executed[done:] == [True, False])  # set, then cleared once done
         finally:
             stop()

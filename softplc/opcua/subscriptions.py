@@ -84,10 +84,13 @@ class GuardedSubscriptionService(SubscriptionService):
         self.subscriptions[result.SubscriptionId] = subscription
         return result
 
-    def put_to_sleep(self, session_id: ua.NodeId) -> None:
+    async def put_to_sleep(self, session_id: ua.NodeId) -> None:
         """Make every subscription of a session dormant (its connection was lost)."""
-        for subscription in self.subscriptions.values():
+        for subscription in list(self.subscriptions.values()):
             if subscription.session_id == session_id and isinstance(subscription, TagSubscription):
+                # Many clients may vanish at once (a switch, a killed process): one at a time,
+                # clear of the scan.
+                await self.guard.clear()
                 subscription.sleep()
 
 
