@@ -228,3 +228,31 @@ async def test_a_client_that_stops_asking_goes_dormant_and_wakes_when_it_asks_ag
     finally:
         await client.disconnect()
     assert not _fed(server, served)
+
+
+async def test_a_connection_whose_session_timed_out_while_open_is_closed(plant) -> None:
+    # A frozen client (or a cable pulled without a TCP reset) leaves its connection open and silent:
+    # once its session has timed out, nothing would ever close it.
+    _, server = plant
+    iserver = server.server.iserver
+    shortest, iserver.min_session_timeout_ms = iserver.min_session_timeout_ms, 500
+    client = client_for(server, "viewer")
+    client.session_timeout = 1000  # ms
+    try:
+        await client.connect()
+        subscription = await client.create_subscription(10, Values())
+        await subscription.subscribe_data_change([client.get_node(server.node_id("count"))])
+        port = client.uaclient.protocol.transport.get_extra_info("sockname")[1]
+
+        def held() -> bool:
+            return any(getattr(protocol, "peer_name", (None, None))[1] == port for protocol in server.server.bserver.clients)
+
+        assert held()
+        for task in (client._supervisor_task, client._stale_watchdog_task, client._renew_channel_task,
+                     client.uaclient.session._publish_task):
+            if task is not None:
+                task.cancel()  # the client freezes; its socket stays open
+        await wait_until(lambda: not held(), timeout=5)
+    finally:
+        iserver.min_session_timeout_ms = shortest
+        await _quietly_disconnect(client)
