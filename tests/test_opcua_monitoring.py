@@ -51,7 +51,8 @@ def _request(node_id: ua.NodeId, handle: int, flt=None, queue_size: int = 1) -> 
     return ua.MonitoredItemCreateRequest(
         ItemToMonitor=ua.ReadValueId(NodeId=node_id, AttributeId=ua.AttributeIds.Value),
         MonitoringMode=ua.MonitoringMode.Reporting,
-        RequestedParameters=ua.MonitoringParameters(ClientHandle=handle, SamplingInterval=0, Filter=flt, QueueSize=queue_size, DiscardOldest=True),
+        RequestedParameters=ua.MonitoringParameters(ClientHandle=handle, SamplingInterval=0, Filter=flt, QueueSize=queue_size,
+                                                    DiscardOldest=True),
     )
 
 

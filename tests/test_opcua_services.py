@@ -176,7 +176,8 @@ async def test_a_history_provider_serves_raw_reads_page_by_page(tmp_path) -> Non
             processed = ua.ReadProcessedDetails(StartTime=origin, EndTime=origin + timedelta(hours=1), ProcessingInterval=1000)
             at_time = ua.ReadAtTimeDetails(ReqTimes=[origin])
             for other in (processed, at_time, ua.ReadRawModifiedDetails(IsReadModified=True, StartTime=origin)):
-                assert (await client.uaclient.history_read(_history(other, count)))[0].StatusCode.value == ua.StatusCodes.BadHistoryOperationUnsupported
+                result = (await client.uaclient.history_read(_history(other, count)))[0]
+                assert result.StatusCode.value == ua.StatusCodes.BadHistoryOperationUnsupported
             with pytest.raises(ua.UaStatusCodeError) as neither:
                 await client.uaclient.history_read(_history(details, count, timestamps=ua.TimestampsToReturn.Neither))
             assert neither.value.code == ua.StatusCodes.BadTimestampsToReturnInvalid
@@ -192,7 +193,10 @@ async def test_calls_that_cannot_be_made_get_the_spec_statuses(plant, viewer) ->
         ua.CallMethodRequest(ObjectId=server_object, MethodId=ua.NodeId("no_such_method", server.namespace_index)),
         ua.CallMethodRequest(ObjectId=ua.NodeId("no_such_object", server.namespace_index), MethodId=get_monitored_items),
         ua.CallMethodRequest(ObjectId=server_object, MethodId=server.node_id("count")),  # a Variable, not a Method
+        ua.CallMethodRequest(ObjectId=server_object, MethodId=ua.NodeId(ua.ObjectIds.Server_ResendData),  # not implemented
+                             InputArguments=[ua.Variant(1, ua.VariantType.UInt32)]),
     ]
     results = await viewer.uaclient.call(calls)
     assert [result.StatusCode.value for result in results] == [
-        ua.StatusCodes.BadMethodInvalid, ua.StatusCodes.BadNodeIdUnknown, ua.StatusCodes.BadMethodInvalid]
+        ua.StatusCodes.BadMethodInvalid, ua.StatusCodes.BadNodeIdUnknown, ua.StatusCodes.BadMethodInvalid,
+        ua.StatusCodes.BadNotImplemented]
