@@ -32,6 +32,17 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--opcua-anonymous", choices=("off", "viewer"), help="anonymous OPC UA sessions: refused, or read-only")
     group.add_argument("--opcua-users", type=Path, metavar="FILE", help="OPC UA users file (default servers.opcua.users_file, STATE_DIR/users.yaml)")
     group.add_argument("--no-opcua", action="store_true", help="do not start the OPC UA server")
+    # Web HMI (softplc.hmi) -- HMI branch: moves onto the config registry at merge
+    from softplc.hmi.settings import host_name as hmi_host
+    from softplc.hmi.settings import port_number as hmi_port
+
+    hmi = parser.add_argument_group("web HMI")
+    hmi.add_argument("--hmi-host", type=hmi_host, metavar="HOST", help="HMI bind address (default servers.hmi.host, 127.0.0.1)")
+    hmi.add_argument("--hmi-port", type=hmi_port, metavar="PORT", help="HMI port (default servers.hmi.port, 8080; 0 = any free port)")
+    hmi.add_argument("--hmi-anonymous", choices=("off", "viewer"), help="visitors who have not logged in: refused, or read-only")
+    hmi.add_argument("--hmi-tls", action="store_true", default=None, help="serve the HMI over HTTPS (certificate made in STATE_DIR/hmi/tls)")
+    hmi.add_argument("--hmi-open", action="store_true", help="open the HMI in a browser once it serves (when there is a screen)")
+    hmi.add_argument("--no-hmi", action="store_true", help="do not start the web HMI")
     # Robot fleet (softplc.fleet)
     robots = parser.add_argument_group("robots")
     robots.add_argument("--no-fleet", action="store_true", help="do not drive the robots of the fleet: section")
@@ -46,7 +57,7 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
 
     builders = [_fleet]  # robots are not servers: --no-servers keeps them
     if not (args is not None and getattr(args, "no_servers", False)):
-        builders += [_opcua, _modbus]
+        builders += [_opcua, _modbus, _hmi]
     adapters: list[Adapter] = []
     problems: list[Problem] = []
     for build in builders:
@@ -115,3 +126,25 @@ def _fleet(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter
     from softplc.fleet.adapter import FleetAdapter
 
     return [FleetAdapter.from_config(config)]
+
+
+def _hmi(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    # HMI branch: the settings and checks live in softplc.hmi.settings (plain data and functions).
+    from softplc.hmi.settings import HmiSettings, hmi_problems
+    from softplc.yamlsource import ConfigError
+
+    problems = hmi_problems(config)  # views are checked even while the HMI is off
+    if problems:
+        raise ConfigError(problems)
+    settings = HmiSettings.from_config(config).override(
+        host=getattr(args, "hmi_host", None),
+        port=getattr(args, "hmi_port", None),
+        anonymous=getattr(args, "hmi_anonymous", None),
+        tls=getattr(args, "hmi_tls", None),
+        open_browser=bool(getattr(args, "hmi_open", False)) or None,
+    )
+    if not settings.enabled or bool(getattr(args, "no_hmi", False)):
+        return []
+    from softplc.hmi.server import HmiServer
+
+    return [HmiServer(config, settings)]

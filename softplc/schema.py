@@ -10,6 +10,7 @@ from typing import Any
 
 from softplc.datatypes import TYPE_NAMES
 from softplc.durations import DURATION_REGEX
+from softplc.hmi.settings import HMI_SECTION, HMI_SERVER  # HMI branch: plain schema data, onto the config registry at merge
 
 NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
 NAME_RULE = "letters, digits and _, not starting with a digit"
@@ -216,10 +217,11 @@ CONFIG_SCHEMA: dict[str, Any] = {
         "tasks": {"type": "object", "propertyNames": {"pattern": NAME_PATTERN}, "additionalProperties": TASK},
         "servers": {
             "type": "object",
-            "properties": {"opcua": OPCUA_SERVER, "modbus": MODBUS_SERVER},
+            "properties": {"opcua": OPCUA_SERVER, "modbus": MODBUS_SERVER, "hmi": HMI_SERVER},
             "additionalProperties": False,
         },
         "fleet": FLEET,
+        "hmi": HMI_SECTION,
         "runtime": {
             "type": "object",
             "properties": {
