@@ -6,6 +6,8 @@ apt_packages=()
 command -v mbpoll >/dev/null 2>&1 || apt_packages+=(mbpoll)
 # node-opcua (tests/node) needs Node.js >= 18 and npm.
 command -v npm >/dev/null 2>&1 || apt_packages+=(nodejs npm)
+# The HMI's browser tests drive Debian's Chromium with the playwright package (never `playwright install`).
+command -v chromium >/dev/null 2>&1 || apt_packages+=(chromium)
 if [ ${#apt_packages[@]} -gt 0 ]; then
   echo "installing system packages: ${apt_packages[*]}" >&2
   scripts/apt-install.sh "${apt_packages[@]}" \
