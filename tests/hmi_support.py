@@ -116,6 +116,9 @@ def plant_yaml(*, anonymous: str | None = None, description: str = SCRIPT_DESCRI
               - name: count
                 program: tests.hmi_support:Counter
                 bind: {{count: counter}}
+              - name: faulty
+                program: tests.hmi_support:Faulty
+                bind: {{trip: flag}}
               - name: level_{{task}}
                 program: tests.hmi_support:Level
                 for_each: task
@@ -162,6 +165,16 @@ class Level(Program):
 
     def scan(self) -> None:
         self.level = min(100.0, 100.0 * self.items / max(self.capacity, 1))
+
+
+class Faulty(Program):
+    """Raises while `trip` is true: a program fault to see and reset."""
+
+    trip = Input("fault while true")
+
+    def scan(self) -> None:
+        if self.trip:
+            raise RuntimeError("tripped by the test")
 
 
 def write_plant(folder: Path, text: str | None = None) -> Path:

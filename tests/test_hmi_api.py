@@ -18,8 +18,9 @@ import aiohttp
 import pytest
 import pytest_asyncio
 
-from hmi_support import PASSWORDS, Plant, start_plant, wait_until
+from hmi_support import DRIVER, PASSWORDS, Plant, start_plant, wait_until
 from softplc.tagdb import Rule, WriteEvent, WriteRejected
+from softplc.tags import Quality
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 
@@ -204,7 +205,9 @@ async def test_a_subscription_gets_a_snapshot_then_only_changes_at_most_rate_per
         assert unknown["items"] == ["no_such_tag"]
         snapshot = await receive_until(ws, "snapshot")
         assert set(snapshot["values"]) == {"counter", "limit", "=t01_iBM + t02_iBM"} and snapshot["done"]
-        assert snapshot["values"]["limit"][0] == plant.db.value("limit") and snapshot["values"]["limit"][1] == 0
+        assert snapshot["values"]["limit"] == plant.db.value("limit") and "quality" not in snapshot  # all good
+        tag = plant.db["limit"]
+        assert snapshot.get("times", {}).get("limit", snapshot["time"]) == round(tag.timestamp, 3)
         # `counter` changes every 10 ms (100/s); the client gets at most 10 updates a second.
         updates, started = 0, time.monotonic()
         while time.monotonic() - started < 2.0:
@@ -225,7 +228,20 @@ async def test_expressions_of_views_are_evaluated_on_the_server(plant: Plant) ->
         while seen.get("=t01_iBM + t02_iBM") != 88 or seen.get("=t01_iBL >= 80") is not True:
             assert time.monotonic() < deadline, seen
             message = json.loads((await ws.receive(timeout=5)).data)
-            seen.update({name: value[0] for name, value in message.get("values", {}).items()})
+            seen.update(message.get("values", {}))
+
+
+async def test_the_quality_of_a_value_travels_with_it(plant: Plant) -> None:
+    async with client() as session, session.ws_connect(plant.url + "api/live") as ws:
+        await ws.send_json({"type": "subscribe", "items": ["r02_xpos", "=t01_iBM + t02_iBM"]})
+        await receive_until(ws, "snapshot")
+        plant.db.submit_quality(["r02_xpos", "t02_iBM"], Quality.BAD, DRIVER)  # a driver whose robot went away
+        message = await receive_until(ws, "update")
+        # An expression is as good as the worst tag it reads.
+        assert message["quality"] == {"r02_xpos": 2, "=t01_iBM + t02_iBM": 2}
+        plant.db.submit_quality(["r02_xpos", "t02_iBM"], Quality.GOOD, DRIVER)
+        message = await receive_until(ws, "update")
+        assert "quality" not in message and set(message["values"]) == {"r02_xpos", "=t01_iBM + t02_iBM"}
 
 
 async def test_views_api_serves_the_drawing_as_an_inert_document(plant: Plant) -> None:
@@ -278,5 +294,23 @@ async def test_a_silent_live_client_is_dropped_after_its_heartbeats(tmp_path: Pa
             ws = await session.ws_connect(plant.url + "api/live", autoping=False)
             await wait_until(lambda: plant.hmi.hub.dropped == 1, timeout=5, message="the silent client dropped")
             await ws.close()
+    finally:
+        await plant.stop()
+
+
+async def test_tls_serves_https_with_a_certificate_made_in_the_state_directory(tmp_path: Path) -> None:
+    plant = await start_plant(tmp_path, tls=True)
+    try:
+        assert plant.url.startswith("https://")
+        assert (tmp_path / "state" / "hmi" / "tls" / "cert.pem").is_file()
+        assert (tmp_path / "state" / "hmi" / "tls" / "key.pem").stat().st_mode & 0o077 == 0
+        async with client() as session:
+            async with session.post(plant.url + "api/login", json={"user": "viewer", "password": PASSWORDS["viewer"]}, ssl=False) as response:
+                assert response.status == 200
+                cookie = response.headers["Set-Cookie"]
+        assert cookie.startswith(f"__Host-softplc_hmi_{plant.hmi.port}=") and "Secure" in cookie
+        with pytest.raises(aiohttp.ClientError):
+            async with client() as session, session.get(plant.url.replace("https://", "http://") + "api/session") as response:
+                await response.read()
     finally:
         await plant.stop()

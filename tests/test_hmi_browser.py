@@ -227,6 +227,27 @@ async def test_the_page_says_disconnected_when_the_runtime_stops_and_recovers_wh
     await context.close()
 
 
+async def test_a_program_fault_shows_with_its_error_and_an_operator_resets_it(browser: Any, plant: Plant) -> None:
+    context, page, _ = await open_page(browser, plant.url + "#/tasks")
+    async with screenshot_on_failure(page, "program-fault"):
+        await ready(page)
+        state = page.locator("[data-program='faulty'] .chip")
+        await page.wait_for_function("() => document.querySelector('[data-program=\"faulty\"] .chip').textContent === 'RUNNING'")
+        plant.drive(flag=True)
+        await page.wait_for_function("() => document.querySelector('[data-program=\"faulty\"] .chip').textContent === 'FAULTED'")
+        assert "RuntimeError: tripped by the test" in await page.text_content("[data-program='faulty'] .error-text")
+        assert await page.locator("[data-command]").count() == 0  # a viewer may not reset
+        plant.drive(flag=False)
+        await log_in(page, "operator")
+        await page.click("[data-command='reset_faults']")
+        await page.wait_for_selector("dialog .change >> text=→true")
+        await page.click("dialog button[type=submit]")
+        await page.wait_for_selector("dialog .done")
+        await page.wait_for_function("() => document.querySelector('[data-program=\"faulty\"] .chip').textContent === 'RUNNING'")
+        assert await state.get_attribute("class") == "chip ok"
+    await context.close()
+
+
 PAGES = ("overview", "view/test", "tags", "tasks", "robots")
 
 

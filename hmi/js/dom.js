@@ -38,7 +38,12 @@ export function clear(node) {
 /** Set text only when it changed (keeps DOM mutations, and their cost, to real changes). */
 export function setText(node, text) {
   const value = String(text);
-  if (node.textContent !== value) node.textContent = value;
+  const only = node.firstChild;
+  if (only && only.nodeType === Node.TEXT_NODE && !only.nextSibling) {
+    if (only.data !== value) only.data = value;  // change the text node in place: no node made or dropped
+  } else if (node.textContent !== value) {
+    node.textContent = value;
+  }
 }
 
 export function setClass(node, name, on) {

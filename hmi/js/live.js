@@ -142,9 +142,12 @@ export class Live extends EventTarget {
       }
       case 'snapshot':
       case 'update': {
+        // {time, values: {name: value}, times: {name: t} (exceptions), quality: {name: code} (not good)}
         const changed = [];
-        for (const [name, triple] of Object.entries(message.values || {})) {
-          this.values.set(name, { v: triple[0], q: triple[1], t: triple[2] });
+        const times = message.times || {};
+        const quality = message.quality || {};
+        for (const [name, value] of Object.entries(message.values || {})) {
+          this.values.set(name, { v: value, q: quality[name] || 0, t: times[name] ?? message.time });
           changed.push(name);
         }
         this._notify(changed);

@@ -10,7 +10,7 @@ import { get, post, setCsrf, forgetMeta } from './api.js';
 import { Live } from './live.js';
 import { openWrite, openLogin, openDetails } from './dialogs.js';
 
-const state = { session: null, live: null, unmount: null, pageId: null, banners: [] };
+const state = { session: null, live: null, unmount: null, pageId: null, banners: [], failed: false };
 
 function context(params) {
   return {
@@ -79,6 +79,7 @@ async function logout() {
 async function restart() {
   forgetMeta();
   await start();
+  state.failed = false;
   state.live.reconnect();
 }
 
@@ -164,7 +165,8 @@ function watchHeader() {
     }
   });
   state.live.addEventListener('hello', async (event) => {
-    if (event.detail.restarted) await restart();  // a new runtime: new sessions, maybe new tags
+    // A new runtime (new sessions, maybe new tags), or the first page load found it down.
+    if (event.detail.restarted || state.failed) await restart();
   });
   state.live.watch(['_sys.state', '_sys.error'], () => {
     const item = state.live.get('_sys.state');
@@ -192,13 +194,14 @@ async function boot() {
   state.live = new Live();
   watchHeader();
   window.addEventListener('hashchange', () => { if (state.session && !state.session.login_required) route(); });
+  state.live.connect();  // at once: the socket opens while the session and the page load
   try {
     await start();
   } catch (error) {
+    state.failed = true;
     const root = clear(document.getElementById('page'));
-    root.append(el('div', { class: 'error-banner', role: 'alert', text: `The runtime cannot be reached: ${error.message}. Reload the page when it is back.` }));
+    root.append(el('div', { class: 'error-banner', role: 'alert', text: `The runtime cannot be reached: ${error.message}. It reconnects by itself.` }));
   }
-  state.live.connect();
   window.softplcHmi = state;  // for debugging and tests: the live channel and session
 }
 

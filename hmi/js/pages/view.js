@@ -46,9 +46,11 @@ export async function mount(root, ctx) {
     }
   }
 
+  const live = ctx.live;
+  const value = (item) => { const entry = item ? live.get(item) : undefined; return entry ? entry.v : undefined; };
+  const qualityOf = (item) => { const entry = item ? live.get(item) : undefined; return entry ? entry.q : 0; };
   const apply = (binding) => {
-    const value = (item) => { const entry = item ? ctx.live.get(item) : undefined; return entry ? entry.v : undefined; };
-    const quality = Math.max(...[binding.source, binding.x, binding.y].filter(Boolean).map((item) => (ctx.live.get(item) || { q: 0 }).q));
+    const quality = Math.max(qualityOf(binding.source), qualityOf(binding.x), qualityOf(binding.y));
     const element = binding.element;
     const v = value(binding.source);
     switch (binding.kind) {
@@ -100,9 +102,12 @@ export async function mount(root, ctx) {
       default:
         break;
     }
-    element.classList.toggle('hmi-q-uncertain', quality === 1);
-    element.classList.toggle('hmi-q-bad', quality === 2);
-    if (binding.target && binding.target !== element) binding.target.classList.toggle('hmi-q-bad', quality === 2);
+    if (quality !== (binding.quality || 0)) {  // most updates keep the quality: touch classes only on a change
+      binding.quality = quality;
+      element.classList.toggle('hmi-q-uncertain', quality === 1);
+      element.classList.toggle('hmi-q-bad', quality === 2);
+      if (binding.target && binding.target !== element) binding.target.classList.toggle('hmi-q-bad', quality === 2);
+    }
   };
 
   const update = (items) => {
