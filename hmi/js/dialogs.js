@@ -5,14 +5,13 @@ import { el, clear, setText } from './dom.js';
 import { writeTag, post } from './api.js';
 import { formatValue, formatWithUnit, formatRange, qualityName } from './format.js';
 
-const dialog = () => document.getElementById('dialog');
-
+/** A new modal <dialog> with `node`, removed when closed (one at a time: an open one is closed). */
 function show(node, className) {
-  const box = dialog();
-  if (box.open) box.close();
-  clear(box);
-  box.className = `dialog ${className || ''}`;
-  box.append(node);
+  for (const open of document.querySelectorAll('dialog.dialog[open]')) open.close();
+  // A fresh element each time: a closing dialog's "close" event never reaches the next one's listeners.
+  const box = el('dialog', { class: `dialog ${className || ''}` }, node);
+  document.body.append(box);
+  box.addEventListener('close', () => box.remove(), { once: true });
   box.showModal();
   return box;
 }
@@ -41,7 +40,8 @@ function parseInput(meta, text) {
 export function openWrite(ctx, meta, preset) {
   return new Promise((resolve) => {
     let result = false;
-    const finish = () => { dialog().close(); };
+    let box = null;
+    const finish = () => { if (box) box.close(); };
     const unit = meta.unit || '';
     const current = () => ctx.live.get(meta.name);
     let watch = null;
@@ -156,7 +156,7 @@ export function openWrite(ctx, meta, preset) {
       facts, stepValue, stepConfirm, message,
       el('div', { class: 'actions' }, cancel, back, next),
     );
-    const box = show(form);
+    box = show(form);
     box.addEventListener('close', () => { if (watch) watch.close(); resolve(result); }, { once: true });
     if (preset !== undefined) toConfirm(preset);
     else if (input.focus) (meta.type === 'bool' ? input.querySelector('input') : input).focus();
@@ -167,17 +167,19 @@ export function openWrite(ctx, meta, preset) {
 export function openLogin(ctx) {
   return new Promise((resolve) => {
     let ok = false;
+    let box = null;
+    const close = () => box && box.close();
     const user = el('input', { type: 'text', id: 'login-user', name: 'user', autocomplete: 'username', required: true });
     const password = el('input', { type: 'password', id: 'login-password', name: 'password', autocomplete: 'current-password', required: true });
     const message = el('div', { role: 'alert' });
     const submit = el('button', { type: 'submit', class: 'btn', text: 'Log in' });
     const form = el('form', { method: 'dialog' },
-      heading('Log in', () => dialog().close()),
+      heading('Log in', close),
       el('p', { class: 'muted small', text: 'The users of the runtime (softplc users add NAME --role ROLE), the same as for OPC UA.' }),
       el('label', { for: 'login-user', text: 'User' }), user,
       el('label', { for: 'login-password', text: 'Password' }), password,
       message,
-      el('div', { class: 'actions' }, el('button', { type: 'button', class: 'btn secondary', text: 'Cancel', onclick: () => dialog().close() }), submit),
+      el('div', { class: 'actions' }, el('button', { type: 'button', class: 'btn secondary', text: 'Cancel', onclick: close }), submit),
     );
     form.addEventListener('submit', async (event) => {
       event.preventDefault();
@@ -186,14 +188,14 @@ export function openLogin(ctx) {
       try {
         await post('/api/login', { user: user.value, password: password.value });
         ok = true;
-        dialog().close();
+        close();
       } catch (error) {
         message.append(el('div', { class: 'refusal', text: error.message }));
       } finally {
         submit.disabled = false;
       }
     });
-    const box = show(form);
+    box = show(form);
     box.addEventListener('close', () => resolve(ok), { once: true });
     user.focus();
   });
@@ -229,12 +231,13 @@ export function openDetails(ctx, title, tags, subtitle) {
   };
   const watch = ctx.live.watch([...rows.keys()], update);
   update([...rows.keys()]);
+  let box = null;
   const node = el('div', { class: 'body' },
-    heading(title, () => dialog().close()),
+    heading(title, () => box && box.close()),
     subtitle ? el('p', { class: 'muted small', text: subtitle }) : null,
     el('table', { class: 'detail-list' }, body),
   );
-  const box = show(node, 'drawer');
+  box = show(node, 'drawer');
   box.addEventListener('close', () => watch.close(), { once: true });
 }
 

@@ -38,6 +38,7 @@ function mountFleet(root, ctx, plant) {
         el('span', {}, el('i', { class: 'sw-route' }), 'robot route, ✕ goal'),
         el('span', { text: 'ring: green moving · blue planning · amber blocked · red failed · grey idle' }),
         el('span', { text: 'click a robot or a station for its tags' }),
+        el('span', { class: 'phone-only', text: 'drag the floor sideways to see all of it' }),
       ),
       robots.node),
     el('div', { class: 'side' }, cards.node),

@@ -83,8 +83,8 @@ export async function mount(root, ctx) {
         case 'time':
           setText(cell.node, `${formatNumber(value, 1)} s`);
           break;
-        case 'ms':
-          setText(cell.node, formatNumber(value, 3));
+        case 'ms':  // about three significant digits: 0.152, 2.68, 100.6, 1022
+          setText(cell.node, formatNumber(value, value < 1 ? 3 : value < 10 ? 2 : value < 100 ? 1 : 0));
           break;
         default:
           setText(cell.node, formatNumber(value));
