@@ -149,6 +149,26 @@ async def test_an_operators_write_is_confirmed_and_read_back_over_opc_ua(browser
     await context.close()
 
 
+async def test_a_robots_details_are_live_and_writable_by_an_operator(browser: Any, plant: Plant) -> None:
+    context, page, _ = await open_page(browser, plant.url + "#/overview")
+    async with screenshot_on_failure(page, "robot-details"):
+        await ready(page)
+        await log_in(page, "operator")
+        await ready(page)
+        await page.click(".robot-card[data-robot='r02']")
+        row = page.locator("dialog[open] tr[data-tag='r02_xpos']")
+        plant.drive(r02_xpos=11.25)
+        await page.wait_for_function("() => document.querySelector('dialog[open] tr[data-tag=\"r02_xpos\"] .live-value').textContent === '11.25 m'")
+        assert await row.locator("button").count() == 0  # read-only for an operator
+        await page.click("dialog[open] tr[data-tag='r02_tcurr'] button")
+        await page.fill("#write-value", "2")
+        await page.click("dialog button[type=submit]")
+        await page.click("dialog button[type=submit]")
+        await page.wait_for_selector("dialog .done")
+        await wait_until(lambda: plant.db.value("r02_tcurr") == 2, message="r02_tcurr written")
+    await context.close()
+
+
 async def test_an_out_of_range_write_shows_the_rule_it_broke(browser: Any, plant: Plant) -> None:
     context, page, _ = await open_page(browser, plant.url + "#/tags?q=t01_iFr")
     async with screenshot_on_failure(page, "out-of-range"):
@@ -203,7 +223,7 @@ async def test_a_script_in_a_description_is_shown_as_text(browser: Any, plant: P
 
 
 async def test_the_page_says_disconnected_when_the_runtime_stops_and_recovers_when_it_returns(browser: Any, tmp_path: Path) -> None:
-    first = await start_plant(tmp_path, heartbeat=0.5)
+    first = await start_plant(tmp_path)  # heartbeat 2 s: the page must notice the closed socket, not a missed heartbeat
     port = first.hmi.port
     context, page, _ = await open_page(browser, first.url + "#/overview")
     second = None
