@@ -219,14 +219,14 @@ class Plant:
 
 
 async def start_plant(folder: Path, *, text: str | None = None, modbus: bool = False, opcua: bool = False,
-                      users: bool = True, **settings: Any) -> Plant:
+                      users: bool = True, clock: Any = None, **settings: Any) -> Plant:
     """Write the plant into `folder`, start it with the HMI on a free port (or settings['port'])."""
     path = write_plant(folder, text)
     state = folder / "state"
     if users:
         add_users(state)
     config = load_config(path)
-    runtime = Runtime(config, RealClock(), state_dir=state)
+    runtime = Runtime(config, clock or RealClock(), state_dir=state)
     adapters: dict[str, Any] = {}
     if opcua:
         from softplc.opcua import OpcUaServer, OpcUaSettings

@@ -120,3 +120,13 @@ def test_anonymous_viewers_only_on_loopback_unless_configured() -> None:
     assert HmiSettings(host="0.0.0.0").anonymous_role is None
     assert HmiSettings(host="0.0.0.0", anonymous="viewer").anonymous_role is Role.VIEWER
     assert HmiSettings(host="127.0.0.1", anonymous="off").anonymous_role is None
+
+
+def test_softplc_run_prints_where_the_hmi_serves(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = write_plant(tmp_path)
+    code = main(["run", str(path), "--sim", "--speed", "20", "--duration", "20", "--no-status", "--state-dir", str(tmp_path / "state"),
+                 "--hmi-port", "0", "--no-opcua", "--no-modbus", "--no-fleet"])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    line = next(line for line in err.splitlines() if line.startswith("serving: HMI on "))
+    assert line.startswith("serving: HMI on http://127.0.0.1:") and "open it in a browser" in line

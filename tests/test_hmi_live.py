@@ -18,6 +18,7 @@ import aiohttp
 import pytest
 
 from hmi_support import plant_yaml, start_plant, wait_until
+from softplc.clock import SimClock
 
 pytestmark = pytest.mark.asyncio
 
@@ -82,4 +83,23 @@ async def test_a_client_that_stops_reading_is_not_buffered_for_and_is_dropped(tm
     finally:
         stop.set()
         await churner
+        await plant.stop()
+
+
+async def test_pacing_is_real_time_under_a_fast_simulated_clock(tmp_path: Path) -> None:
+    """--sim --speed 50: the plant runs 50 times faster, the browser still gets at most 10 updates a second."""
+    plant = await start_plant(tmp_path, clock=SimClock(speed=50))
+    try:
+        async with aiohttp.ClientSession() as session, session.ws_connect(plant.url + "api/live") as ws:
+            await ws.send_json({"type": "subscribe", "items": ["counter", "_sys.time"]})
+            updates, values, started = 0, [], time.monotonic()
+            while time.monotonic() - started < 2.0:
+                message = json.loads((await ws.receive(timeout=2)).data)
+                if message["type"] in ("update", "snapshot"):
+                    updates += message["type"] == "update"
+                    values.append(message["values"].get("counter"))
+            counts = [value for value in values if value is not None]
+        assert counts[-1] - counts[0] > 2000  # 2 s at 50x: 100 simulated seconds of a 10 ms task
+        assert 10 <= updates <= 22, updates
+    finally:
         await plant.stop()
