@@ -69,5 +69,5 @@ class WriteLog:
         budget = self._budgets.pop(who, None)
         if budget is None or not budget.suppressed:
             return
-        log.warning("HMI: %d more writes by %s in the last %.0f s (%d refused; tags %s)", budget.suppressed, who,
+        log.warning("HMI: %d more writes by %s in the last %g s (%d refused; tags %s)", budget.suppressed, who,
                     self.interval, budget.refused, ", ".join(budget.tags))

@@ -77,7 +77,8 @@ function mountGroups(root, ctx, plant) {
   });
   root.append(
     el('div', { class: 'panel' }, el('h1', { text: plant.name }), plant.description ? el('p', { class: 'muted', text: plant.description }) : null,
-      el('p', { class: 'small muted', text: 'This plant has no robot fleet: here are its tag groups. The Tags page lists every tag; Views shows the mimics drawn for it.' })),
+      el('p', { class: 'small muted', text: `This plant has no robot fleet: here are its tag groups. The Tags page lists every tag${
+        ctx.session.pages.some((page) => page.group === 'Views') ? '; the views show the mimics drawn for it' : ''}.` })),
     el('div', { class: 'grid-cards' }, ...cards),
   );
   const units = new Map();
