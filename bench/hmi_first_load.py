@@ -71,6 +71,8 @@ async def main(args: argparse.Namespace) -> None:
         for column, label in ((0, "DOMContentLoaded"), (1, "load event"), (2, "ready (mimic drawn with live values)")):
             print(f"  {label}: p50 {np.percentile(data[:, column], 50):.0f} ms, max {data[:, column].max():.0f} ms")
         print(f"  {int(data[0, 4])} requests, {data[0, 3] / 1024:.0f} KiB transferred")
+        ready = float(np.percentile(data[:, 2], 50))
+        print(f"  {'goal met' if ready <= 1000 else 'GOAL MISSED'}: first load ≤ 1 s (ready p50 {ready:.0f} ms, max {data[:, 2].max():.0f} ms)")
     finally:
         runtime.terminate()
         try:

@@ -318,6 +318,13 @@ async def main(args: argparse.Namespace) -> None:
         print(f"  other clients: {min(messages) if messages else 0}..{max(messages) if messages else 0} messages each, "
               f"{megabytes / (args.seconds + 15):.1f} MB/s together")
         print(f"  load average {load_average()} (2 cores shared)")
+        p95 = lambda values: float(np.percentile(values, 95)) if values else float("inf")  # noqa: E731
+        clients_cost = loaded["cpu"] - baseline["cpu"]
+        for goal, met in ((f"change → DOM p95 ≤ 100 ms (Modbus write {p95(probe_latency):.0f} ms)", p95(probe_latency) <= 100),
+                          (f"change → DOM p95 ≤ 100 ms (program scan {p95(stamp_latency):.0f} ms)", p95(stamp_latency) <= 100),
+                          (f"10 ms task start latency p99 ≤ 1 ms ({loaded['p99']:.3f} ms)", loaded["p99"] <= 1.0),
+                          (f"HMI work ≤ 25 % of a core ({clients_cost * 100:.1f} % more CPU with the clients)", clients_cost <= 0.25)):
+            print(f"  {'goal met' if met else 'GOAL MISSED'}: {goal}")
     finally:
         await http.close()
         modbus.close()

@@ -22,11 +22,12 @@ import json
 import logging
 import math
 import time
-from collections.abc import Awaitable, Callable, Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from aiohttp import WSMsgType, web
 
+from softplc.hmi.pacing import Pacer
 from softplc.hmi.sessions import Identity
 from softplc.tags import Quality
 
@@ -46,57 +47,60 @@ def wire_value(value: Any) -> Any:
 class Encoder:
     """Turns item names into JSON messages of their current values, in chunks that yield in between."""
 
-    def __init__(self, lookup: Callable[[str], Any], pause: Callable[[], Awaitable[None]]) -> None:
+    def __init__(self, lookup: Callable[[str], Any], pacer: Pacer) -> None:
         self._lookup = lookup  # name → object with value, quality, timestamp (a Tag or an expression Item)
-        self._pause = pause  # yields to the loop (letting a due scan cycle go first)
+        self._pacer = pacer  # each chunk is one turn (pacing.py)
         self.seconds = 0.0  # CPU time spent encoding (diagnostics, benchmarks)
         self.messages = 0
 
     async def encode(self, kind: str, names: list[str]) -> list[bytes]:
         """`{"type": kind, "time", "values", ["times"], ["quality"]}` messages for `names`; the last has `"done": true`."""
         chunks: list[bytes] = []
-        lookup, codes, good = self._lookup, QUALITY_CODE, Quality.GOOD
         for start in range(0, max(len(names), 1), CHUNK):
-            if start:
-                await self._pause()
-            begun = time.thread_time()  # CPU time of the loop's thread: what encoding cost, however busy the machine
-            values: dict[str, Any] = {}
-            times: dict[str, float] = {}
-            qualities: dict[str, int] = {}
-            base: float | None = None
-            for name in names[start:start + CHUNK]:
-                item = lookup(name)
-                if item is None:
-                    continue
-                value = item.value
-                if type(value) is float and not math.isfinite(value):
-                    value = wire_value(value)
-                values[name] = value
-                stamp = item.timestamp
-                if base is None:
-                    base = stamp
-                elif stamp != base:
-                    times[name] = round(stamp, 3)
-                if item.quality is not good:
-                    qualities[name] = codes[item.quality]
-            message: dict[str, Any] = {"type": kind, "time": round(base or 0.0, 3), "values": values}
-            if times:
-                message["times"] = times
-            if qualities:
-                message["quality"] = qualities
-            if start + CHUNK >= len(names):
-                message["done"] = True
-            chunks.append(json.dumps(message, separators=(",", ":"), ensure_ascii=False).encode())
-            self.seconds += time.thread_time() - begun
-            self.messages += 1
+            async with self._pacer.turn():
+                chunks.append(self._chunk(kind, names[start:start + CHUNK], last=start + CHUNK >= len(names)))
         return chunks
+
+    def _chunk(self, kind: str, names: list[str], *, last: bool) -> bytes:
+        begun = time.thread_time()  # CPU time of the loop's thread: what encoding cost, however busy the machine
+        lookup, codes, good = self._lookup, QUALITY_CODE, Quality.GOOD
+        values: dict[str, Any] = {}
+        times: dict[str, float] = {}
+        qualities: dict[str, int] = {}
+        base: float | None = None
+        for name in names:
+            item = lookup(name)
+            if item is None:
+                continue
+            value = item.value
+            if type(value) is float and not math.isfinite(value):
+                value = wire_value(value)
+            values[name] = value
+            stamp = item.timestamp
+            if base is None:
+                base = stamp
+            elif stamp != base:
+                times[name] = round(stamp, 3)
+            if item.quality is not good:
+                qualities[name] = codes[item.quality]
+        message: dict[str, Any] = {"type": kind, "time": round(base or 0.0, 3), "values": values}
+        if times:
+            message["times"] = times
+        if qualities:
+            message["quality"] = qualities
+        if last:
+            message["done"] = True
+        encoded = json.dumps(message, separators=(",", ":"), ensure_ascii=False).encode()
+        self.seconds += time.thread_time() - begun
+        self.messages += 1
+        return encoded
 
 
 class Client:
     """One browser's live connection: its group, and a sender task that only it can hold up."""
 
     def __init__(self, ws: web.WebSocketResponse, transport: Any, identity: Identity, peer: str, encoder: Encoder,
-                 pause: Callable[[], Awaitable[None]]) -> None:
+                 pacer: Pacer) -> None:
         self.ws = ws
         self.transport = transport
         self.identity = identity
@@ -107,7 +111,7 @@ class Client:
         self.sent_frames = 0
         self.sent_bytes = 0
         self._encoder = encoder
-        self._pause = pause
+        self._pacer = pacer
         self._queue: list[bytes] = []  # encoded chunks to send now (shared with the group's other clients)
         self._pending: dict[str, None] = {}  # names changed while busy: their latest values go next
         self._full = False  # the group's whole snapshot goes next (a (re)subscription)
@@ -170,7 +174,6 @@ class Client:
                         self._queue = await self.group.snapshot()
                     for chunk in self._queue:
                         await self._send(chunk)
-                        await self._pause()
                     self._queue = []
                     if self._pending and self.group is not None:
                         names, self._pending = list(self._pending), {}
@@ -184,6 +187,9 @@ class Client:
             pass  # the connection went away; the WebSocket handler cleans up
 
     async def _send(self, data: bytes) -> None:
+        # Not a turn: writing an encoded frame costs microseconds, and waiting for a slow
+        # client's socket to drain must not hold up the others. A due scan cycle goes first.
+        await self._pacer.ready()
         await self.ws.send_frame(data, WSMsgType.TEXT)
         self.sent_frames += 1
         self.sent_bytes += len(data)
@@ -214,6 +220,10 @@ class Group:
         self.dirty[name] = None
         self._version += 1
 
+    def mark_all(self, names: Iterable[str]) -> None:
+        self.dirty.update(dict.fromkeys(names))
+        self._version += 1
+
     async def snapshot(self) -> list[bytes]:
         """The whole set's current values, encoded once for every client (re)subscribing meanwhile."""
         cached = self._snapshot
@@ -224,13 +234,13 @@ class Group:
         self._snapshot = (version, chunks)
         return chunks
 
-    async def run(self, pause_for: Callable[[float], Awaitable[None]]) -> None:
+    async def run(self, pacer: Pacer) -> None:
         """Send the changes, at most one update per interval, until nothing is left."""
         try:
             while self.dirty and self.clients:
                 wait = self.next_allowed - time.monotonic()
                 if wait > 0:
-                    await pause_for(wait)
+                    await pacer.sleep(wait)
                 names, self.dirty = list(self.dirty), {}
                 self.next_allowed = time.monotonic() + self.interval
                 chunks = await self._encoder.encode("update", names)
