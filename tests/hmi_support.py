@@ -219,8 +219,8 @@ class Plant:
 
 
 async def start_plant(folder: Path, *, text: str | None = None, modbus: bool = False, opcua: bool = False,
-                      users: bool = True, clock: Any = None, **settings: Any) -> Plant:
-    """Write the plant into `folder`, start it with the HMI on a free port (or settings['port'])."""
+                      users: bool = True, clock: Any = None, start: bool = True, **settings: Any) -> Plant:
+    """Write the plant into `folder`, start it (unless `start=False`) with the HMI on a free port (or settings['port'])."""
     path = write_plant(folder, text)
     state = folder / "state"
     if users:
@@ -240,7 +240,8 @@ async def start_plant(folder: Path, *, text: str | None = None, modbus: bool = F
     hmi = HmiServer(config, HmiSettings.from_config(config).override(**settings))
     for adapter in [*adapters.values(), hmi]:
         runtime.add_adapter(adapter)
-    await runtime.start()
+    if start:
+        await runtime.start()
     return Plant(runtime, hmi, adapters)
 
 

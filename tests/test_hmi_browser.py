@@ -268,6 +268,47 @@ async def test_a_program_fault_shows_with_its_error_and_an_operator_resets_it(br
     await context.close()
 
 
+BANNER_JS = "export function mount(node) { node.className = 'error-banner'; node.textContent = 'ALARM: a banner of another module'; }"
+PAGE_JS = "export function mount(root, ctx) { root.textContent = `extra page for ${ctx.session.role}`; root.dataset.ready = '1'; }"
+
+
+async def test_other_modules_add_pages_banners_and_routes(browser: Any, tmp_path: Path) -> None:
+    """The shell other issues build on: a page in the navigation, a banner on every page, routes of their own."""
+    from aiohttp import web
+
+    from softplc.hmi.shell import Page
+    from softplc.roles import Role
+
+    def script(text: str) -> Any:
+        async def handler(request: web.Request) -> web.Response:
+            return web.Response(text=text, content_type="text/javascript")
+
+        return handler
+
+    plant = await start_plant(tmp_path, start=False)
+    plant.hmi.shell.add_page(Page("extra", "Extra", "/ext/page.js", order=50))
+    plant.hmi.shell.add_page(Page("secret", "Engineering", "/ext/page.js", order=51, min_role=Role.ENGINEER))
+    plant.hmi.shell.add_banner("/ext/banner.js")
+    plant.hmi.shell.add_routes([web.get("/ext/banner.js", script(BANNER_JS)), web.get("/ext/page.js", script(PAGE_JS))])
+    await plant.runtime.start()
+    context, page, errors = await open_page(browser, plant.url + "#/overview")
+    async with screenshot_on_failure(page, "extensions"):
+        try:
+            await ready(page)
+            assert await page.text_content("#banners") == "ALARM: a banner of another module"
+            assert await page.locator("#nav a[data-page='secret']").count() == 0  # not for a viewer
+            await page.click("#nav a[data-page='extra']")
+            await page.wait_for_selector("main[data-page='extra'][data-ready='1']")
+            assert await page.text_content("main") == "extra page for viewer"
+            assert await page.text_content("#banners") == "ALARM: a banner of another module"
+            with pytest.raises(RuntimeError, match="add pages, banners and routes before runtime.start"):
+                plant.hmi.shell.add_page(Page("late", "Late", "/ext/page.js"))
+            assert not errors, errors
+        finally:
+            await plant.stop()
+    await context.close()
+
+
 PAGES = ("overview", "view/test", "tags", "tasks", "robots")
 
 
