@@ -36,7 +36,7 @@ export class Floor {
     const names = [];
     for (const robot of this.fleet.robots) names.push(...Object.values(robot.tags));
     for (const task of this.fleet.tasks) {
-      for (const field of ['iBM', 'iBL', 'iBC', 'qSM', 'qSL', 'qSC', 'src_x', 'src_y', 'dest_x', 'dest_y']) {
+      for (const field of ['iBM', 'iBL', 'iBC', 'iFr', 'qSM', 'qSL', 'qSC', 'src_x', 'src_y', 'dest_x', 'dest_y']) {
         if (task.tags[field]) names.push(task.tags[field]);
       }
     }
@@ -95,8 +95,9 @@ export class Floor {
         'data-level': 0, 'data-tag': task.tags[levelField] || task.tags[itemsField] });
       const count = svg('text', { class: 'bar-text', x: 48, y: -22, text: '' });
       const percent = svg('text', { class: 'bar-text', x: 48, y: 34, text: '' });
-      node.append(track, fill, count, percent);
-      bar = { fill, count, percent };
+      const rate = svg('text', { class: 'bar-text rate', x: 33, y: 54, 'text-anchor': 'middle', text: '' });
+      node.append(track, fill, count, percent, rate);
+      bar = { fill, count, percent, rate };
     }
     node.addEventListener('click', () => this.handlers.task(task));
     node.addEventListener('keydown', (event) => { if (event.key === 'Enter') this.handlers.task(task); });
@@ -189,6 +190,7 @@ export class Floor {
       station.flipped = true;
       for (const node of station.node.querySelectorAll('.bar-track, .bar-fill')) node.setAttribute('x', Number(node.getAttribute('x')) - 66 - Number(node.getAttribute('width')) + 18);
       for (const node of [station.bar.count, station.bar.percent]) { node.setAttribute('x', -48); node.setAttribute('text-anchor', 'end'); }
+      station.bar.rate.setAttribute('x', -33);
     }
     const items = value(tags[station.itemsField]);
     const capacity = value(tags[station.capacityField]);
@@ -204,6 +206,8 @@ export class Floor {
       setText(station.bar.percent, `${formatNumber(level, 0)}%`);
     }
     if (typeof items === 'number') setText(station.bar.count, typeof capacity === 'number' ? `${items}/${capacity}` : String(items));
+    const rate = station.kind === 'in' ? value(tags.iFr) : undefined;  // items arriving per minute
+    if (typeof rate === 'number') setText(station.bar.rate, `+${formatNumber(rate, rate % 1 ? 1 : 0)}/min`);
     const quality = this.live.get(tags[station.levelField] || tags[station.itemsField]);
     station.node.classList.toggle('q-bad', Boolean(quality && quality.q === 2));
   }
