@@ -96,7 +96,7 @@ async def test_a_buffer_bar_follows_a_modbus_write(browser: Any, plant: Plant) -
         # iBM → the plant's program computes iBL = 60 % → the station's bar and the task card follow.
         await page.wait_for_selector(".station[data-task='t01'][data-kind='in'] .bar-fill[data-level='60.0']")
         assert await page.get_attribute(".station[data-task='t01'][data-kind='in'] .bar-fill", "height") == f"{68 * 0.6:.1f}"
-        await page.wait_for_function("() => document.querySelector('.task-card[data-task=\"t01\"] .level .label').textContent.includes('60 / 100 items')")
+        await page.wait_for_function("() => document.querySelector('.task-card[data-task=\"t01\"] .level .label')?.textContent.includes('60 / 100 items')")
         await client.write_register(modbus.map.by_tag["t01_iBM"].address, 0)
     client.close()
     await context.close()
@@ -158,7 +158,7 @@ async def test_a_robots_details_are_live_and_writable_by_an_operator(browser: An
         await page.click(".robot-card[data-robot='r02']")
         row = page.locator("dialog[open] tr[data-tag='r02_xpos']")
         plant.drive(r02_xpos=11.25)
-        await page.wait_for_function("() => document.querySelector('dialog[open] tr[data-tag=\"r02_xpos\"] .live-value').textContent === '11.25 m'")
+        await page.wait_for_function("() => document.querySelector('dialog[open] tr[data-tag=\"r02_xpos\"] .live-value')?.textContent === '11.25 m'")
         assert await row.locator("button").count() == 0  # read-only for an operator
         await page.click("dialog[open] tr[data-tag='r02_tcurr'] button")
         await page.fill("#write-value", "2")
@@ -191,15 +191,15 @@ async def test_a_user_mimic_follows_its_tags(browser: Any, plant: Plant) -> None
     async with screenshot_on_failure(page, "user-mimic"):
         await ready(page)
         plant.drive(t01_iBM=90, t02_iBM=5, r01_xpos=3.0, r01_ypos=2.0)
-        await page.wait_for_function("() => document.querySelector('#items_span').textContent === '90 pcs'")
-        await page.wait_for_function("() => document.querySelector('#sum').textContent === '95'")  # a server-side expression
-        await page.wait_for_function("() => document.querySelector('#level').dataset.share === '0.9000'")
+        await page.wait_for_function("() => document.querySelector('#items_span')?.textContent === '90 pcs'")
+        await page.wait_for_function("() => document.querySelector('#sum')?.textContent === '95'")  # a server-side expression
+        await page.wait_for_function("() => document.querySelector('#level')?.dataset.share === '0.9000'")
         assert await page.get_attribute("#level", "height") == str(96 * 0.9)
         assert await page.eval_on_selector("#level", "node => node.style.fill") == "rgb(179, 38, 30)"  # above the 80 threshold
         assert await page.is_visible("#alarm")  # visible: t01_iBL >= 80
-        await page.wait_for_function("() => document.querySelector('#robot').getAttribute('transform') === 'translate(230.00 170.00)'")
+        await page.wait_for_function("() => document.querySelector('#robot')?.getAttribute('transform') === 'translate(230.00 170.00)'")
         plant.drive(t01_iBM=10)
-        await page.wait_for_function("() => document.querySelector('#alarm').style.display === 'none'")
+        await page.wait_for_function("() => document.querySelector('#alarm')?.style.display === 'none'")
         # The drawing's own script and handler never ran.
         assert await page.evaluate("() => window.__pwned") is None
         assert await page.locator(".mimic-host script").count() == 0
@@ -240,7 +240,7 @@ async def test_the_page_says_disconnected_when_the_runtime_stops_and_recovers_wh
             second.drive(r02_xpos=15.0)
             await page.wait_for_selector("#connection.ok", timeout=15000)
             assert await page.is_hidden("#offline")
-            await page.wait_for_function("() => Math.abs(document.querySelector('.floor .robot[data-robot=\"r02\"]').dataset.x - 15) < 0.02")
+            await page.wait_for_function("() => Math.abs(document.querySelector('.floor .robot[data-robot=\"r02\"]')?.dataset.x - 15) < 0.02")
         finally:
             if second is not None:
                 await second.stop()
@@ -252,9 +252,9 @@ async def test_a_program_fault_shows_with_its_error_and_an_operator_resets_it(br
     async with screenshot_on_failure(page, "program-fault"):
         await ready(page)
         state = page.locator("[data-program='faulty'] .chip")
-        await page.wait_for_function("() => document.querySelector('[data-program=\"faulty\"] .chip').textContent === 'RUNNING'")
+        await page.wait_for_function("() => document.querySelector('[data-program=\"faulty\"] .chip')?.textContent === 'RUNNING'")
         plant.drive(flag=True)
-        await page.wait_for_function("() => document.querySelector('[data-program=\"faulty\"] .chip').textContent === 'FAULTED'")
+        await page.wait_for_function("() => document.querySelector('[data-program=\"faulty\"] .chip')?.textContent === 'FAULTED'")
         assert "RuntimeError: tripped by the test" in await page.text_content("[data-program='faulty'] .error-text")
         assert await page.locator("[data-command]").count() == 0  # a viewer may not reset
         plant.drive(flag=False)
@@ -263,7 +263,7 @@ async def test_a_program_fault_shows_with_its_error_and_an_operator_resets_it(br
         await page.wait_for_selector("dialog .change >> text=→true")
         await page.click("dialog button[type=submit]")
         await page.wait_for_selector("dialog .done")
-        await page.wait_for_function("() => document.querySelector('[data-program=\"faulty\"] .chip').textContent === 'RUNNING'")
+        await page.wait_for_function("() => document.querySelector('[data-program=\"faulty\"] .chip')?.textContent === 'RUNNING'")
         assert await state.get_attribute("class") == "chip ok"
     await context.close()
 
@@ -352,7 +352,7 @@ async def test_the_tags_page_shows_10000_tags_and_subscribes_only_the_visible_ro
             await wait_until(lambda: "_sys.fast.level_t02.faults" in watched() and "r01_xpos" not in watched(), message="resubscribed")
             plant.drive(b9999_text="seen live")
             await page.fill("input[type=search]", "b9999")
-            await page.wait_for_function("() => document.querySelector('.vrow[data-tag=\"b9999_text\"] .live-value').textContent === 'seen live'")
+            await page.wait_for_function("() => document.querySelector('.vrow[data-tag=\"b9999_text\"] .live-value')?.textContent === 'seen live'")
             assert not errors, errors
         finally:
             await plant.stop()

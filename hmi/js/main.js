@@ -101,6 +101,7 @@ async function show(page, params) {
   markNav();
   const root = clear(document.getElementById('page'));
   root.dataset.page = page.id;
+  delete root.dataset.ready;  // the page sets it again once it shows live values
   try {
     const module = await import(page.module);
     if (state.pageId !== page.id) return;  // another page was opened meanwhile
