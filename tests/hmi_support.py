@@ -75,7 +75,7 @@ def plant_yaml(*, anonymous: str | None = None, description: str = SCRIPT_DESCRI
     """
     hmi = f"\n    anonymous: {anonymous}" if anonymous else ""
     pad = " " * 10  # the template's indentation in the text below, before dedent
-    blob = f"\n{pad}blob:\n{pad}  group: Blobs\n{pad}  count: {blobs}\n{pad}  prefix: b\n{pad}  tags:\n{pad}    text: {{type: string}}" if blobs else ""
+    blob = f"\n{pad}blob:\n{pad}  group: Blobs\n{pad}  count: {blobs}\n{pad}  prefix: b\n{pad}  tags:\n{pad}    text: {{type: string, modbus: {{enabled: false}}}}" if blobs else ""
     return textwrap.dedent(f"""
         version: 1
         plant: {{name: "hmi <b>test</b> plant", description: "a plant for the HMI tests"}}
