@@ -25,6 +25,16 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".${extras}"
   touch "$stamp"
 fi
+# Front-end libraries of the web HMI, pinned in hmi/package.json + package-lock.json, installed
+# with npm ci (served under /vendor/) when it has any; skipped while the lock file is unchanged.
+hmi_libraries=$(.venv/bin/python -c 'import json; print(len(json.load(open("hmi/package.json")).get("dependencies") or {}))')
+if [ "$hmi_libraries" != 0 ] && { [ ! -f hmi/node_modules/.package-lock.json ] || [ hmi/package-lock.json -nt hmi/node_modules/.package-lock.json ]; }; then
+  if ! command -v npm >/dev/null 2>&1; then
+    echo "warning: npm is missing, so the HMI's front-end libraries are not installed (apt-get install npm)" >&2
+  elif ! (cd hmi && npm ci --silent --no-audit --no-fund >/dev/null 2>&1); then
+    echo "warning: npm ci in hmi/ failed; HMI pages that need a library will say so" >&2
+  fi
+fi
 if [ "${1:-}" = "test" ]; then
   scripts/install-test-tools.sh
 fi

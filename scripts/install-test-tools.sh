@@ -8,6 +8,8 @@ command -v mbpoll >/dev/null 2>&1 || apt_packages+=(mbpoll)
 command -v npm >/dev/null 2>&1 || apt_packages+=(nodejs npm)
 # The storage tests (historian, alarm journal) start a real PostgreSQL server (tests/postgres_server.py).
 compgen -G "/usr/lib/postgresql/*/bin/initdb" >/dev/null || apt_packages+=(postgresql)
+# The HMI's browser tests drive Debian's Chromium with the playwright package (never `playwright install`).
+command -v chromium >/dev/null 2>&1 || apt_packages+=(chromium)
 if [ ${#apt_packages[@]} -gt 0 ]; then
   echo "installing system packages: ${apt_packages[*]}" >&2
   scripts/apt-install.sh "${apt_packages[@]}" \

@@ -39,6 +39,17 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--opcua-anonymous", choices=("off", "viewer"), help="anonymous OPC UA sessions: refused, or read-only")
     group.add_argument("--opcua-users", type=Path, metavar="FILE", help="OPC UA users file (default servers.opcua.users_file, STATE_DIR/users.yaml)")
     group.add_argument("--no-opcua", action="store_true", help="do not start the OPC UA server")
+    # Web HMI (softplc.hmi)
+    from softplc.hmi.settings import host_name as hmi_host
+    from softplc.hmi.settings import port_number as hmi_port
+
+    hmi = parser.add_argument_group("web HMI")
+    hmi.add_argument("--hmi-host", type=hmi_host, metavar="HOST", help="HMI bind address (default servers.hmi.host, 127.0.0.1)")
+    hmi.add_argument("--hmi-port", type=hmi_port, metavar="PORT", help="HMI port (default servers.hmi.port, 8080; 0 = any free port)")
+    hmi.add_argument("--hmi-anonymous", choices=("off", "viewer"), help="visitors who have not logged in: refused, or read-only")
+    hmi.add_argument("--hmi-tls", action="store_true", default=None, help="serve the HMI over HTTPS (certificate made in STATE_DIR/hmi/tls)")
+    hmi.add_argument("--hmi-open", action="store_true", help="open the HMI in a browser once it serves (when there is a screen)")
+    hmi.add_argument("--no-hmi", action="store_true", help="do not start the web HMI")
     # Robot fleet (softplc.fleet)
     robots = parser.add_argument_group("robots")
     robots.add_argument("--no-fleet", action="store_true", help="do not drive the robots of the fleet: section")
@@ -75,7 +86,7 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
     # next: the OPC UA server lists them (as conditions) when it starts.
     builders = [_audit, _alarms, _fleet, _history]  # none of them is a server: --no-servers keeps them
     if not (args is not None and getattr(args, "no_servers", False)):
-        builders += [_opcua, _modbus]
+        builders += [_opcua, _modbus, _hmi]
     adapters: list[Adapter] = []
     problems: list[Problem] = []
     for build in builders:
@@ -91,7 +102,7 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
 def servers_off(config: PlantConfig, args: argparse.Namespace | None = None) -> list[str]:
     """The protocol servers this run does not start, each with why and how to turn it on."""
     if args is not None and getattr(args, "no_servers", False):
-        return ["OPC UA and Modbus TCP (--no-servers): run without it to serve them"]
+        return ["OPC UA, Modbus TCP and the web HMI (--no-servers): run without it to serve them"]
     off = []
     if getattr(args, "no_opcua", False):
         off.append("OPC UA (--no-opcua)")
@@ -101,6 +112,13 @@ def servers_off(config: PlantConfig, args: argparse.Namespace | None = None) -> 
         off.append("Modbus TCP (--no-modbus)")
     elif not _modbus_settings(config, args).enabled:
         off.append(f"Modbus TCP (servers.modbus.enabled: false in {config.path.name}): set enabled: true, or give --modbus-port PORT, to serve it")
+    if getattr(args, "no_hmi", False):
+        off.append("the web HMI (--no-hmi)")
+    else:
+        from softplc.hmi.settings import HmiSettings
+
+        if not HmiSettings.from_config(config).enabled:
+            off.append(f"the web HMI (servers.hmi.enabled: false in {config.path.name}): set enabled: true to serve it")
     return off
 
 
@@ -211,3 +229,23 @@ def _history(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapt
     policies = settings.policies(definitions)
     types = {d.name: (d.type.value, d.unit) for d in definitions if d.name in policies}
     return [HistoryRecorder(settings, config.name, policies, types)]
+
+
+def _hmi(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
+    from softplc.hmi.settings import HmiSettings  # its sections are checked by their owner (softplc.hmi.section)
+
+    settings = HmiSettings.from_config(config).override(
+        host=getattr(args, "hmi_host", None),
+        port=getattr(args, "hmi_port", None),
+        anonymous=getattr(args, "hmi_anonymous", None),
+        tls=getattr(args, "hmi_tls", None),
+        open_browser=bool(getattr(args, "hmi_open", False)) or None,
+    )
+    port = simulation_port(args, "hmi_port")
+    if port is not None:
+        settings = dataclasses.replace(settings, port=port)
+    if not settings.enabled or bool(getattr(args, "no_hmi", False)):
+        return []
+    from softplc.hmi.server import HmiServer
+
+    return [HmiServer(config, settings)]

@@ -1,4 +1,4 @@
-"""Conditions over tag names, e.g. `t01_qSL >= 100 or t02_qSL >= 100` (for `run --until`).
+"""Conditions over tag names, e.g. `t01_qSL >= 100 or t02_qSL >= 100` (for `run --until` and HMI views).
 
 Only comparisons, arithmetic, `and`/`or`/`not`, numbers, strings, true/false and tag names are
 allowed; nothing is executed as Python code.
@@ -82,6 +82,10 @@ class Condition:
     def evaluate(self, values: Callable[[str], Any]) -> bool:
         """Evaluate with `values(tag_name)` giving each tag's current value."""
         return bool(self._eval(self._tree, values))
+
+    def value(self, values: Callable[[str], Any]) -> Any:
+        """The expression's own value (number, text or truth value), e.g. for an HMI text."""
+        return self._eval(self._tree, values)
 
     def _eval(self, node: ast.AST, values: Callable[[str], Any]) -> Any:
         name = _dotted(node)

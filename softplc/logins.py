@@ -116,10 +116,12 @@ class LoginThrottle:
 class PasswordLogins:
     """Decides password logins against a UserStore, off the event loop (see the module docstring)."""
 
-    def __init__(self, store: UserStore, throttle: LoginThrottle | None = None) -> None:
+    def __init__(self, store: UserStore, throttle: LoginThrottle | None = None, *, service: str = "OPC UA") -> None:
+        """`service` names the server in log lines ("OPC UA", "HMI")."""
         self.store = store
         self.throttle = throttle or LoginThrottle()
-        self.peer_log = PeerLog(log)
+        self.service = service
+        self.peer_log = PeerLog(log, service=service)
         self._key = secrets.token_bytes(32)
         self._remembered: dict[bytes, tuple[str, str]] = {}  # HMAC of the credentials → (name, hash it matched)
         self._checks: dict[bytes, asyncio.Task[bool]] = {}  # credentials being hashed now
@@ -147,8 +149,8 @@ class PasswordLogins:
             if reason is None and len(self._checks) >= MAX_CHECKS_WAITING:
                 reason = f"{MAX_CHECKS_WAITING} logins already waiting to be checked"
             if reason is not None:
-                self.peer_log.warning(peer, "refused logins", "OPC UA: login of %r from %s refused without checking: %s",
-                                      name, peer, reason, detail=repr(name))
+                self.peer_log.warning(peer, "refused logins", "%s: login of %r from %s refused without checking: %s",
+                                      self.service, name, peer, reason, detail=repr(name))
                 return False
             entry = self.store.get(name)
             stored = entry.password_hash if entry is not None and entry.password_hash else None
@@ -159,7 +161,7 @@ class PasswordLogins:
             check.add_done_callback(lambda done: self._finished(done, peer, name, token))
         correct = await asyncio.shield(check)
         if not correct:
-            self.peer_log.warning(peer, "failed logins", "OPC UA: failed login for user %r from %s", name, peer, detail=repr(name))
+            self.peer_log.warning(peer, "failed logins", "%s: failed login for user %r from %s", self.service, name, peer, detail=repr(name))
         return correct
 
     def _finished(self, check: asyncio.Task[bool], peer: str, name: str, token: bytes) -> None:
@@ -187,12 +189,12 @@ class PasswordLogins:
         while len(self._remembered) >= MAX_REMEMBERED:
             del self._remembered[next(iter(self._remembered))]
         self._remembered[token] = (entry.name, stored)
-        log.info("OPC UA: user %r logged in (%s) from %s", entry.name, entry.role.value, peer)
+        log.info("%s: user %r logged in (%s) from %s", self.service, entry.name, entry.role.value, peer)
         return True
 
     def _worker(self) -> ThreadPoolExecutor:
         if self._executor is None:
-            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="softplc-opcua-login")
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"softplc-{self.service.lower().replace(' ', '')}-login")
         return self._executor
 
     def _token(self, name: str, password: str) -> bytes:

@@ -123,6 +123,21 @@ class _Setup:
 _setup = _Setup()
 
 
+class _Stderr(logging.StreamHandler):  # type: ignore[type-arg]
+    """The console: whatever `sys.stderr` is when a line is written (a redirection, a test's capture)."""
+
+    def __init__(self) -> None:
+        super().__init__(sys.stderr)
+
+    @property  # type: ignore[override]
+    def stream(self) -> TextIO:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: TextIO) -> None:
+        pass
+
+
 def configure(options: LogOptions = LogOptions(), stream: TextIO | None = None) -> None:
     """Replace the root logger's handlers with softplc's; raises LogFileError if the log file cannot be opened."""
     global _setup
@@ -138,7 +153,7 @@ def configure(options: LogOptions = LogOptions(), stream: TextIO | None = None) 
             ))
         except OSError as error:
             raise LogFileError(f"--log-file {options.file}: {error.strerror or error}") from None
-    console = logging.StreamHandler(stream or sys.stderr)  # looked up now: redirections are honoured
+    console = logging.StreamHandler(stream) if stream is not None else _Stderr()
     if options.file is not None:
         console.setLevel(max(level, logging.WARNING))
     handlers.append(console)

@@ -36,10 +36,10 @@ class PeerLog:
 
     MAX_DETAILS = 5
 
-    def __init__(self, logger: logging.Logger, interval: float = DEFAULT_INTERVAL, prefix: str = "OPC UA") -> None:
+    def __init__(self, logger: logging.Logger, interval: float = DEFAULT_INTERVAL, *, service: str = "OPC UA") -> None:
         self.logger = logger
         self.interval = interval
-        self.prefix = prefix  # what the summary line starts with: the protocol the peer spoke
+        self.service = service  # names the server in the summary line
         self._quiet: dict[tuple[str, str], _Quiet] = {}
 
     def warning(self, peer: str, kind: str, message: str, *args: Any, detail: str | None = None) -> None:
@@ -69,7 +69,7 @@ class PeerLog:
         peer, kind = key
         details = f" ({', '.join(quiet.details)})" if quiet.details else ""
         self.logger.warning("%s: %d more %s from %s in the last %.0f s%s",
-                            self.prefix, quiet.count, kind, peer, self.interval, details)
+                            self.service, quiet.count, kind, peer, self.interval, details)
         # Still flooding: stay quiet for another interval, so a steady flood writes one line per interval.
         self._quiet[key] = _Quiet()
         asyncio.get_running_loop().call_later(self.interval, self._summarise, key)

@@ -24,7 +24,8 @@ if TYPE_CHECKING:
     from softplc.tags import TagDef
     from softplc.yamlsource import Problem
 
-# Modules that own a section (each defines SECTION), in the order their problems are reported.
+# Modules that own a section (each defines SECTION, or SECTIONS for several), in the order their
+# problems are reported.
 # They are imported whenever a configuration is loaded, so they must not import asyncua,
 # pymodbus, numpy and the like at module level (tests/test_config_sections.py checks it).
 SECTION_MODULES: tuple[str, ...] = (
@@ -34,6 +35,7 @@ SECTION_MODULES: tuple[str, ...] = (
     "softplc.fleet.section",
     "softplc.history.section",
     "softplc.alarms.section",
+    "softplc.hmi.section",
     "softplc.audit.section",
 )
 
@@ -41,7 +43,11 @@ SECTION_MODULES: tuple[str, ...] = (
 @functools.cache
 def registered() -> tuple[Section, ...]:
     """Every owner's SECTION, in SECTION_MODULES order."""
-    return check_registry(tuple(importlib.import_module(name).SECTION for name in SECTION_MODULES))
+    owned: list[Section] = []
+    for name in SECTION_MODULES:
+        module = importlib.import_module(name)
+        owned.extend(getattr(module, "SECTIONS", None) or (module.SECTION,))  # an owner of two parts lists both
+    return check_registry(tuple(owned))
 
 
 def tag_keys(sections: tuple[Section, ...] | None = None) -> dict[str, dict[str, Any]]:

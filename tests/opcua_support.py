@@ -13,10 +13,11 @@ from typing import Any
 from asyncua import Client
 
 from softplc import InOut, Input, Output, Program
-from softplc.clock import RealClock
+from softplc.clock import Clock, RealClock
 from softplc.config import load_config
 from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.opcua.client import ClientCertificate, ensure_client_certificate, pem_certificate
+from softplc.opcua.history import HistoryProvider
 from softplc.runtime import Runtime
 
 PASSWORDS = {"viewer": "viewer-pass-1", "operator": "operator-pass-1", "engineer": "engineer-pass-1"}
@@ -46,26 +47,30 @@ tags:
   count:   {type: uint32, access: ro, description: scans of the fast task}
   request: {type: int32, description: written by clients}
   reply:   {type: int32, access: ro, description: the program's echo of request}
+  ramp:    {type: float64, access: ro, min: 0, max: 1000, description: count modulo 1000}
 tasks:
   fast:
     interval: 10ms
     programs:
       - name: ticker
         program: tests.opcua_support:Ticker
-        bind: {count: count, request: request, reply: reply}
+        bind: {count: count, request: request, reply: reply, ramp: ramp}
 """
 
 
 class Ticker(Program):
-    """Counts scans and echoes `request` into `reply` (so a client write is seen by a program)."""
+    """Counts scans, echoes `request` into `reply` (so a client write is seen by a program), and
+    ramps `ramp` by 1 per scan over its EURange 0..1000 (a slow drift for deadband tests)."""
 
     count = InOut("scan counter")
     request = Input("client-written value")
     reply = Output("echo of request")
+    ramp = Output("count modulo 1000")
 
     def scan(self) -> None:
         self.count = (self.count + 1) % 2**32
         self.reply = self.request
+        self.ramp = float(self.count % 1000)
 
 
 def write_config(directory: Path, text: str = PLANT) -> Path:
@@ -82,16 +87,17 @@ def add_users(state_dir: Path) -> UserStore:
 
 
 @asynccontextmanager
-async def running_plant(directory: Path, text: str = PLANT, **settings: Any) -> AsyncIterator[tuple[Runtime, OpcUaServer]]:
-    """A runtime (real time) with the OPC UA server on a free loopback port."""
+async def running_plant(directory: Path, text: str = PLANT, *, clock: Clock | None = None, history: HistoryProvider | None = None,
+                        **settings: Any) -> AsyncIterator[tuple[Runtime, OpcUaServer]]:
+    """A runtime (real time unless `clock` says otherwise) with the OPC UA server on a free loopback port."""
     config = load_config(write_config(directory, text))
     state_dir = directory / "state"
     state_dir.mkdir(exist_ok=True)
     if not (state_dir / "users.yaml").exists():
         add_users(state_dir)
     settings.setdefault("endpoint", "opc.tcp://127.0.0.1:0/softplc/")
-    server = OpcUaServer(OpcUaSettings(**settings))
-    runtime = Runtime(config, RealClock(), state_dir=state_dir)
+    server = OpcUaServer(OpcUaSettings(**settings), history=history)
+    runtime = Runtime(config, clock or RealClock(), state_dir=state_dir)
     runtime.add_adapter(server)
     await runtime.start()
     try:

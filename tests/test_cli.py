@@ -27,7 +27,7 @@ from conftest import REPO
 
 SOFTPLC = str(Path(sys.executable).parent / "softplc")
 # Real-time runs serve on free ports: other plants on this machine may hold the default ones.
-FREE_PORTS = ["--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/", "--modbus-port", "0"]
+FREE_PORTS = ["--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/", "--modbus-port", "0", "--hmi-port", "0"]
 PROGRAMS = REPO / "tests" / "configs" / "sample_programs.py"
 
 PLANT = f"""
@@ -363,19 +363,20 @@ def test_where_it_serves_is_printed_even_when_the_run_is_over_at_once(cli, plant
 # -- which servers run: defaults, what is off, and --sim on free ports ------------------------
 
 
-def test_without_a_servers_section_both_servers_run_on_loopback_default_ports(plant: Path) -> None:
+def test_without_a_servers_section_every_server_runs_on_loopback_default_ports(plant: Path) -> None:
     from softplc.adapters import build_adapters
     from softplc.cli import build_parser
 
     adapters = {a.name: a for a in build_adapters(load_config(plant), build_parser().parse_args(["run", str(plant)]))}
-    assert set(adapters) == {"audit", "opcua", "modbus"}
+    assert set(adapters) == {"audit", "opcua", "modbus", "hmi"}
     assert adapters["opcua"].settings.endpoint == "opc.tcp://127.0.0.1:4840/softplc/"
     assert (adapters["modbus"].settings.host, adapters["modbus"].settings.port) == ("127.0.0.1", 5020)
+    assert (adapters["hmi"].settings.host, adapters["hmi"].settings.port) == ("127.0.0.1", 8080)
 
 
 def test_run_says_which_servers_are_off_and_how_to_turn_them_on(cli, tmp_path: Path) -> None:
     plant = tmp_path / "plant.yaml"
-    plant.write_text(PLANT + "servers:\n  opcua: {enabled: false}\n  modbus: {enabled: false}\n")
+    plant.write_text(PLANT + "servers:\n  opcua: {enabled: false}\n  modbus: {enabled: false}\n  hmi: {enabled: false}\n")
     code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path, "--no-audit")
     assert code == 0, err
     lines = err.splitlines()
@@ -383,14 +384,15 @@ def test_run_says_which_servers_are_off_and_how_to_turn_them_on(cli, tmp_path: P
         "serving: nothing (no server enabled)",
         "not serving: OPC UA (servers.opcua.enabled: false in plant.yaml): set enabled: true to serve it",
         "not serving: Modbus TCP (servers.modbus.enabled: false in plant.yaml): set enabled: true, or give --modbus-port PORT, to serve it",
-        "press Ctrl-C to stop",
+        "not serving: the web HMI (servers.hmi.enabled: false in plant.yaml): set enabled: true to serve it",
     ], err
     code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path, "--no-servers", "--modbus-port", "0")
-    assert "not serving: OPC UA and Modbus TCP (--no-servers): run without it to serve them" in err.splitlines()
+    assert "not serving: OPC UA, Modbus TCP and the web HMI (--no-servers): run without it to serve them" in err.splitlines()
     code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path, "--modbus-port", "0")
     assert err.splitlines()[1].startswith("serving: audit trail: every client write and command to SQLite ")  # on by default
     assert [line for line in err.splitlines() if line.startswith(("serving:", "not serving:"))][2:] == [
-        "not serving: OPC UA (servers.opcua.enabled: false in plant.yaml): set enabled: true to serve it"]
+        "not serving: OPC UA (servers.opcua.enabled: false in plant.yaml): set enabled: true to serve it",
+        "not serving: the web HMI (servers.hmi.enabled: false in plant.yaml): set enabled: true to serve it"]
 
 
 def test_under_sim_servers_bind_free_ports_unless_a_flag_says_otherwise(plant: Path) -> None:
@@ -399,20 +401,21 @@ def test_under_sim_servers_bind_free_ports_unless_a_flag_says_otherwise(plant: P
 
     config, parser = load_config(plant), build_parser()
 
-    def bound(*flags: str) -> tuple[str, int]:
+    def bound(*flags: str) -> tuple[str, int, int]:
         adapters = {a.name: a for a in build_adapters(config, parser.parse_args(["run", str(plant), *flags]))}
-        return adapters["opcua"].settings.endpoint, adapters["modbus"].settings.port
+        return adapters["opcua"].settings.endpoint, adapters["modbus"].settings.port, adapters["hmi"].settings.port
 
-    assert bound() == ("opc.tcp://127.0.0.1:4840/softplc/", 5020)  # real time: as configured
-    assert bound("--sim") == ("opc.tcp://127.0.0.1:0/softplc/", 0)
-    assert bound("--sim", "--modbus-port", "1502", "--opcua-endpoint", "opc.tcp://127.0.0.1:4841/x/") == ("opc.tcp://127.0.0.1:4841/x/", 1502)
+    assert bound() == ("opc.tcp://127.0.0.1:4840/softplc/", 5020, 8080)  # real time: as configured
+    assert bound("--sim") == ("opc.tcp://127.0.0.1:0/softplc/", 0, 0)
+    assert bound("--sim", "--modbus-port", "1502", "--opcua-endpoint", "opc.tcp://127.0.0.1:4841/x/", "--hmi-port", "8181") == (
+        "opc.tcp://127.0.0.1:4841/x/", 1502, 8181)
     off = plant.with_name("off.yaml")
     off.write_text(PLANT + "servers:\n  modbus: {enabled: false}\n")
-    assert [a.name for a in build_adapters(load_config(off), parser.parse_args(["run", str(off), "--sim"]))] == ["audit", "opcua"]
+    assert [a.name for a in build_adapters(load_config(off), parser.parse_args(["run", str(off), "--sim"]))] == ["audit", "opcua", "hmi"]
 
 
 def test_a_simulation_beside_a_running_plant_starts_and_serves(cli, tmp_path: Path) -> None:
-    # The plant takes two ports; a simulation of a configuration naming exactly those ports must
+    # The plant takes three ports; a simulation of a configuration naming exactly those ports must
     # not collide with it (before: "address already in use").
     (tmp_path / "plant.yaml").write_text(PLANT)
     running = Process(["run", str(tmp_path / "plant.yaml"), "--no-status", "--state-dir", str(tmp_path / "running"), *FREE_PORTS], tmp_path)
@@ -420,14 +423,16 @@ def test_a_simulation_beside_a_running_plant_starts_and_serves(cli, tmp_path: Pa
         running.wait_for("press Ctrl-C to stop", timeout=60)
         opcua_port = int(next(line for line in running.lines if line.startswith("serving: OPC UA on")).split(":")[3].split("/")[0])
         modbus_port = int(next(line for line in running.lines if line.startswith("serving: Modbus TCP on")).split()[4].split(":")[1])
+        hmi_port = int(next(line for line in running.lines if line.startswith("serving: HMI on")).split(":")[3].split("/")[0])
         plant = tmp_path / "same_ports.yaml"
         plant.write_text(PLANT + f"servers:\n  opcua: {{endpoint: 'opc.tcp://127.0.0.1:{opcua_port}/softplc/'}}\n"
-                         f"  modbus: {{port: {modbus_port}}}\n")
+                         f"  modbus: {{port: {modbus_port}}}\n  hmi: {{port: {hmi_port}}}\n")
         code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path / "sim", "--no-audit")
         assert code == 0, err
         served = [line for line in err.splitlines() if line.startswith("serving: ")]
-        assert len(served) == 2 and f":{opcua_port}/" not in served[0] and f":{modbus_port} " not in served[1], served
+        assert len(served) == 3 and f":{opcua_port}/" not in served[0] and f":{modbus_port} " not in served[1], served
         assert served[0].startswith("serving: OPC UA on opc.tcp://127.0.0.1:") and served[1].startswith("serving: Modbus TCP on 127.0.0.1:")
+        assert served[2].startswith("serving: HMI on http://127.0.0.1:") and f":{hmi_port}/" not in served[2], served
     finally:
         running.popen.send_signal(signal.SIGINT)
         running.finish(timeout=30)

@@ -79,10 +79,11 @@ def test_every_owner_module_is_light_to_import() -> None:
 
 def test_the_existing_owners_are_registered_with_their_sections_and_keys() -> None:
     paths = [section.path for section in sections.registered()]
-    assert paths == [("runtime",), ("servers", "opcua"), ("servers", "modbus"), ("fleet",), ("history",), ("alarms",), ("audit",)]
+    assert paths == [("runtime",), ("servers", "opcua"), ("servers", "modbus"), ("fleet",), ("history",), ("alarms",), ("servers", "hmi"), ("hmi",),
+                     ("audit",)]
     assert set(sections.tag_keys()) == {"modbus", "history"}
     properties = sections.config_schema()["properties"]
-    assert set(properties["servers"]["properties"]) == {"opcua", "modbus"}
+    assert set(properties["servers"]["properties"]) == {"opcua", "modbus", "hmi"}
     assert "modbus" in properties["tags"]["additionalProperties"]["properties"]
 
 

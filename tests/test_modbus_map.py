@@ -295,3 +295,21 @@ def test_system_tags_that_do_not_fit_are_left_out_with_a_warning(make_config, ca
     assert "_sys.fast.latency_ms_p99" not in m.by_tag
     assert all(mapping.end <= 65536 for mapping in m.mappings)
     assert "_sys. tags (from _sys." in caplog.text and "not served over Modbus" in caplog.text
+
+
+def test_a_template_too_big_for_modbus_is_one_message_not_one_per_instance(make_config) -> None:
+    from softplc.yamlsource import ConfigError
+
+    with pytest.raises(ConfigError) as raised:
+        make_config("""\
+            version: 1
+            templates:
+              blob:
+                count: 5000
+                prefix: b
+                tags:
+                  text: {type: string}
+            """)
+    [problem] = raised.value.problems
+    assert "'b4097_text' and 903 more tags after it do not fit the holding registers when packed automatically" in problem.message
+    assert "modbus: {enabled: false}" in problem.message and (problem.location.line, problem.location.column) == (7, 7)

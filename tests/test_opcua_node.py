@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import json
 import shutil
+from datetime import datetime
 
 import pytest
 
@@ -28,9 +29,9 @@ def _require_node_opcua() -> str:
     return node
 
 
-async def _run(node: str, *arguments: str) -> tuple[int, dict | None, str]:
+async def _run(node: str, *arguments: str, script: str = "opcua_check.js") -> tuple[int, dict | None, str]:
     process = await asyncio.create_subprocess_exec(
-        node, "opcua_check.js", *arguments, cwd=NODE_DIR, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        node, script, *arguments, cwd=NODE_DIR, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
     )
     stdout, stderr = await asyncio.wait_for(process.communicate(), 60)
     results = [line[len("RESULT "):] for line in stdout.decode().splitlines() if line.startswith("RESULT ")]
@@ -88,3 +89,39 @@ async def test_node_opcua_over_sign_and_encrypt_after_its_certificate_is_trusted
         results = [entry[len("RESULT "):] for entry in rest.decode().splitlines() if entry.startswith("RESULT ")]
         assert process.returncode == 0 and results, (stderr + rest).decode()[-3000:]
         _check(json.loads(results[0]), runtime, server)
+
+
+async def test_node_opcua_sees_current_time_deadbands_and_spec_statuses(tmp_path) -> None:
+    """Issue 14, OPC UA items 1-6 and 9 as an independent client sees them (tests/node/opcua_services_check.js)."""
+    node = _require_node_opcua()
+    async with running_plant(tmp_path, security=("None",)) as (runtime, server):
+        code, seen, output = await _run(node, server.endpoint, "operator", PASSWORDS["operator"], script="opcua_services_check.js")
+    assert code == 0 and seen is not None, output
+    # 1. CurrentTime is a DateTime that tells the time and advances; ServerStatus's too, never before StartTime.
+    first, second = seen["times"]
+    for reading in (first, second):
+        assert reading["dataType"] == 13  # DateTime, not Null
+        assert abs(_seconds(reading["currentTime"]) - _seconds(reading["clientTime"])) < 2
+        assert _seconds(reading["statusCurrentTime"]) >= _seconds(reading["statusStartTime"])
+    assert _seconds(second["currentTime"]) - _seconds(first["currentTime"]) >= 1.0
+    assert _seconds(second["statusCurrentTime"]) - _seconds(first["statusCurrentTime"]) >= 1.0
+    changes = [_seconds(text) for text in seen["currentTimeChanges"]]
+    # the value when the item was created, then one a second
+    assert len(changes) >= 3 and changes == sorted(changes) and changes[-1] - changes[-2] >= 0.99, seen["currentTimeChanges"]
+    # 2, 3. Deadbands compare with the last reported value: a drift of 1 per scan is reported every
+    # 11 scans under an absolute deadband of 10 and a percent deadband of 1 % of EURange 0..1000.
+    for values in (seen["absolute"], seen["percent"]):
+        assert len(values) >= 8, values
+        assert all(abs(later - earlier) > 10 for earlier, later in zip(values, values[1:])), values
+    # 3, 4, 6. Filters that do not fit are refused per item; queue sizes revised (0 -> 1, capped at 100).
+    assert seen["created"] == [
+        ["BadFilterNotAllowed", 0], ["BadFilterNotAllowed", 0], ["BadDeadbandFilterInvalid", 0], ["BadDeadbandFilterInvalid", 0],
+        ["Good", 1], ["Good", 100],
+    ]
+    # 5. HistoryRead, 9. Call.
+    assert seen["history"] == ["BadNodeIdUnknown", "BadHistoryOperationUnsupported"]
+    assert seen["calls"] == ["BadMethodInvalid", "BadNodeIdUnknown"]
+
+
+def _seconds(iso: str) -> float:
+    return datetime.fromisoformat(iso.replace("Z", "+00:00")).timestamp()

@@ -13,7 +13,7 @@ import pytest
 import pytest_asyncio
 from asyncua import Client, ua
 
-from softplc.opcua import Role, UserStore
+from softplc.opcua import Pki, Role, UserStore
 from softplc.opcua.security import fingerprint
 from tests.conftest import REPO
 from softplc.opcua.client import make_client
@@ -146,3 +146,17 @@ async def test_an_untrusted_channel_certificate_gets_no_session_even_if_create_s
         async with client:
             pass
     assert refused.value.code == ua.StatusCodes.BadCertificateUntrusted
+
+
+async def test_a_certificate_for_another_application_uri_is_refused(secure) -> None:
+    directory, _, server = secure
+    certificate = make_client_certificate(directory, "uri-client")  # issued for urn:softplc:client:uri-client
+    Pki(directory / "state" / "pki").trust(str(certificate.certificate))
+    client = await _secured(server, certificate, ENCRYPT)
+    client.application_uri = "urn:example:someone-else"  # the description no longer matches the certificate
+    with pytest.raises(ua.UaStatusCodeError) as refused:
+        async with client:
+            pass
+    assert refused.value.code == ua.StatusCodes.BadCertificateUriInvalid
+    async with await _secured(server, certificate, ENCRYPT) as honest:  # its own URI: welcome
+        assert await honest.get_node(server.node_id("s1")).read_value() == "hello"

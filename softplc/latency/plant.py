@@ -50,7 +50,7 @@ def handshake_config(
     task["watchdog"] = f"{max(scan * 1000, 5):g}ms"
     task["programs"][0]["params"] = {"scenario": scenario, "scan_interval": interval}
     # Only the server under test runs: another one would compete for the CPU.
-    servers: dict[str, Any] = {"opcua": {"enabled": False}, "modbus": {"enabled": False}}
+    servers: dict[str, Any] = {"opcua": {"enabled": False}, "modbus": {"enabled": False}, "hmi": {"enabled": False}}
     if opcua_endpoint is not None:
         servers["opcua"] = {**data["servers"].get("opcua", {}), "enabled": True, "endpoint": opcua_endpoint, **(opcua_extra or {})}
     if modbus_port is not None:

@@ -208,6 +208,7 @@ class _Builder:
         self.paths = tag_paths(config)
         self.problems: list[Problem] = []
         self.template_sizes = {("templates", name, "tags"): len(instances) for name, instances in config.instances.items()}
+        self.overflow: dict[Table, list[Mapping]] = {}  # auto-allocated tags past the last address, per table
 
     def problem(self, tag: TagDef, key: str | None, message: str) -> None:
         """Report at the value of `modbus: {key: ...}`, or at the tag's name when key is None."""
@@ -236,6 +237,15 @@ class _Builder:
             mapping = self._place(tag, cursors)
             if mapping is not None:
                 user.append(mapping)
+        for table, left in self.overflow.items():
+            # One message for all of them (a big template would otherwise give one per instance).
+            first = left[0]
+            more = f" and {len(left) - 1} more tag{'s' if len(left) > 2 else ''} after it" if len(left) > 1 else ""
+            self.problem(first.tag, None,
+                f"'{first.name}'{more} do{'' if more else 'es'} not fit the {table.plural} when packed automatically "
+                f"('{first.name}' would need {first.address}..{first.end - 1}, beyond the last address 65535): leave tags out "
+                "of Modbus (modbus: {enabled: false} on a tag or template), shorten strings (servers.modbus.string_words), "
+                "or turn the Modbus server off (servers.modbus.enabled: false)")
         system: list[Mapping] = []
         if settings.system_tags:
             system_cursors = {table: settings.system_base for table in Table}
@@ -253,7 +263,7 @@ class _Builder:
             if left_out:
                 log.warning("%d _sys. tags (from %s on) do not fit above servers.modbus.system_base %d and are not "
                             "served over Modbus; lower system_base or string_words", len(left_out), left_out[0], settings.system_base)
-            for mapping in user:
+            for mapping in user if not self.overflow else []:  # an overflow is already one message about the same tags
                 if not mapping.pinned and mapping.end > settings.system_base:
                     self.problem(mapping.tag, None,
                         f"'{mapping.name}' would be auto-allocated at {mapping.table.plural} {mapping.address}..{mapping.end - 1}, "
@@ -282,8 +292,10 @@ class _Builder:
         if mapping is None:
             return None
         if mapping.end > ADDRESS_SPACE:
-            self.problem(tag, "address" if pinned else None,
-                f"'{tag.name}' needs {mapping.table.plural} {mapping.address}..{mapping.end - 1}, beyond the last address 65535")
+            if pinned:
+                self.problem(tag, "address", f"'{tag.name}' needs {mapping.table.plural} {mapping.address}..{mapping.end - 1}, beyond the last address 65535")
+            else:
+                self.overflow.setdefault(mapping.table, []).append(mapping)
             return None
         if not pinned:
             cursors[table] = mapping.end

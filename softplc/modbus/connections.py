@@ -257,7 +257,7 @@ class PlcTcpServer(ModbusTcpServer):
         self.max_connections = max_connections
         self.idle_timeout = idle_timeout
         self.frame_timeout = frame_timeout
-        self.peer_log = PeerLog(log, prefix="Modbus TCP")
+        self.peer_log = PeerLog(log, service="Modbus TCP")
         self.framing_errors = 0
         self.refusal_report = EventReport(
             logging.WARNING,

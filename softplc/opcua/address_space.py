@@ -20,7 +20,7 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 from datetime import datetime, timezone
@@ -51,6 +51,11 @@ _EU_INFORMATION = ua.NodeId(ua.ObjectIds.EUInformation)
 _BUILD_SLICE = 0.005
 READ = 1  # AccessLevel bit CurrentRead
 READ_WRITE = 3  # CurrentRead | CurrentWrite
+HISTORY_READ = 4  # AccessLevel bit HistoryRead: the tag has history (a HistoryProvider says so)
+
+
+def _never(tag: str) -> bool:
+    return False
 
 
 def tag_node_id(name: str, namespace_index: int) -> ua.NodeId:
@@ -130,6 +135,7 @@ class AddressSpaceBuilder:
         self._static: dict[Any, AttributeValue] = {}
         self._data_types: dict[ua.NodeId, AttributeValue] = {}
         self._descriptions: dict[str, AttributeValue] = {}
+        self._historized: Callable[[str], bool] = _never
 
     def _shared(self, value: Any, variant_type: ua.VariantType) -> AttributeValue:
         key = (value, variant_type)
@@ -138,11 +144,13 @@ class AddressSpaceBuilder:
             attribute = self._static[key] = AttributeValue(ua.DataValue(ua.Variant(value, variant_type)))
         return attribute
 
-    async def build(self, roots: Sequence[_Folder], tags: dict[str, Tag]) -> None:
+    async def build(self, roots: Sequence[_Folder], tags: dict[str, Tag], historized: Callable[[str], bool] | None = None) -> None:
         """Add every folder and tag under Objects (a root folder with no children is left out).
 
+        `historized(tag)`: whether a tag has history (AccessLevel HistoryRead, Historizing).
         Yields to the event loop every few milliseconds so a big plant does not stall others.
         """
+        self._historized = historized or _never
         objects = self.aspace[_OBJECTS_FOLDER]
         self._yield_at = time.perf_counter() + _BUILD_SLICE
         for root in roots:
@@ -191,7 +199,8 @@ class AddressSpaceBuilder:
         self.node_count += 1
         return node
 
-    def _variable_attributes(self, node: NodeData, value: AttributeValue, data_type: ua.NodeId, access: int) -> None:
+    def _variable_attributes(self, node: NodeData, value: AttributeValue, data_type: ua.NodeId, access: int,
+                             historizing: bool = False) -> None:
         data_type_attribute = self._data_types.get(data_type)
         if data_type_attribute is None:
             data_type_attribute = self._data_types[data_type] = AttributeValue(ua.DataValue(ua.Variant(data_type, ua.VariantType.NodeId)))
@@ -203,7 +212,7 @@ class AddressSpaceBuilder:
             ua.AttributeIds.AccessLevel: access_attribute,
             ua.AttributeIds.UserAccessLevel: access_attribute,
             ua.AttributeIds.MinimumSamplingInterval: self._shared(0.0, ua.VariantType.Double),
-            ua.AttributeIds.Historizing: self._shared(False, ua.VariantType.Boolean),
+            ua.AttributeIds.Historizing: self._shared(historizing, ua.VariantType.Boolean),
         })
 
     def _link(self, parent: NodeData, child: NodeData, reference: ua.NodeId, node_class: ua.NodeClass, type_definition: ua.NodeId) -> None:
@@ -234,7 +243,11 @@ class AddressSpaceBuilder:
     def _add_variable(self, definition: TagDef, parent: NodeData, tag: Tag) -> None:
         node = self._base_node(ua.NodeId(definition.name, self.ns), definition.name, definition.description, ua.NodeClass.Variable)
         value = AttributeValue(data_value(definition, tag.value, tag.quality, tag.timestamp, tag.forced))
-        self._variable_attributes(node, value, DATA_TYPE_IDS[definition.type], READ_WRITE if definition.access is Access.RW else READ)
+        access = READ_WRITE if definition.access is Access.RW else READ
+        historizing = self._historized(definition.name)
+        if historizing:
+            access |= HISTORY_READ
+        self._variable_attributes(node, value, DATA_TYPE_IDS[definition.type], access, historizing)
         numeric = definition.type.is_numeric
         has_range = numeric and (definition.min is not None or definition.max is not None)
         has_unit = bool(definition.unit)

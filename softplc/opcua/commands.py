@@ -39,7 +39,7 @@ _caller: contextvars.ContextVar[tuple[Origin, ua.NodeId] | None] = contextvars.C
 
 
 def install_caller_context(iserver: InternalServer) -> None:
-    """Make every session created from now on publish its caller (`current_origin()`) while it calls methods or writes."""
+    """Make every session created from now on publish its caller (`current_origin()`) while it calls methods."""
     if getattr(iserver, "_softplc_caller_context", False):
         return
     create_session = iserver.create_session
@@ -47,32 +47,18 @@ def install_caller_context(iserver: InternalServer) -> None:
     def create_with_caller(*args: Any, **kwargs: Any) -> Any:
         session = create_session(*args, **kwargs)
         call = session.call
-        write = session.write
 
-        def caller() -> tuple[Origin, ua.NodeId]:
+        async def call_as_caller(params: list[ua.CallMethodRequest]) -> list[ua.CallMethodResult]:
             user = session.user
             role = role_of(user)
             name = getattr(user, "name", None) or ("internal" if role is None else "anonymous")
-            return Origin("opcua", name, _peer(session.name), role), session.session_id
-
-        async def call_as_caller(params: list[ua.CallMethodRequest]) -> list[ua.CallMethodResult]:
-            token = _caller.set(caller())
+            token = _caller.set((Origin("opcua", name, _peer(session.name), role), session.session_id))
             try:
                 return await call(params)
             finally:
                 _caller.reset(token)
 
-        # The Write service hands the attribute service only the user: the peer address for
-        # the audit trail comes from here (softplc/opcua/writes.py).
-        async def write_as_caller(params: ua.WriteParameters) -> list[ua.StatusCode]:
-            token = _caller.set(caller())
-            try:
-                return await write(params)
-            finally:
-                _caller.reset(token)
-
         session.call = call_as_caller
-        session.write = write_as_caller
         return session
 
     iserver.create_session = create_with_caller  # type: ignore[method-assign]
@@ -87,7 +73,7 @@ def _peer(name: Any) -> str:
 
 
 def current_origin() -> Origin | None:
-    """The Origin of the client session whose method call or write is being served (None: no client's)."""
+    """The Origin of the client session whose method call is being served (None: no client call)."""
     caller = _caller.get()
     return caller[0] if caller is not None else None
 

@@ -15,6 +15,13 @@
   (BadUserAccessDenied), without asyncua's error line.
 - asyncua ignores RequestedMaxReferencesPerNode and has no BrowseNext: Browse and BrowseNext
   are served here with continuation points (browsing.py).
+- The session's user learns the client's address once its session is activated (writes carry
+  it in their `Origin`, for the audit trail).
+- A session whose connection is lost keeps its subscriptions until it times out (asyncua, Part
+  4: the client may come back with ActivateSession on a new connection); they go dormant at
+  once, so a vanished client costs no work per tag change meanwhile (subscriptions.py). A
+  connection whose session timed out while it stayed open (a hung client, a cable pulled without
+  a TCP reset) is closed; asyncua left it open for good.
 """
 
 from __future__ import annotations
@@ -29,7 +36,11 @@ from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua.ua_binary import struct_from_binary
 from cryptography import x509
 
+from asyncua.server.internal_session import SessionState
+
 from softplc.opcua.browsing import ContinuationPoints
+from softplc.opcua.roles import SessionUser
+from softplc.opcua.subscriptions import GuardedSubscriptionService
 from softplc.peers import peer_host
 
 
@@ -101,7 +112,27 @@ class GuardedProcessor(UaProcessor):
             return True
         if typeid == _BROWSE or typeid == _BROWSE_NEXT:
             return await self._browse(typeid, requesthdr, seqhdr, body)
-        return await super()._process_message(typeid, requesthdr, seqhdr, body)
+        answered = await super()._process_message(typeid, requesthdr, seqhdr, body)
+        if typeid == _ACTIVATE_SESSION and self.session is not None and isinstance(self.session.user, SessionUser):
+            self.session.user.peer = peer_host(self.name)
+        return answered
+
+    async def close(self) -> None:
+        # Called when the connection is lost, and by asyncua's session watchdog when the client
+        # sent nothing for the session timeout. Publish requests that came by this connection can
+        # no longer be answered: dropped, so no subscription takes one for a sign of life.
+        self._publish_requests.clear()
+        self._publish_results_subs.clear()
+        await super().close()
+        session = self.session
+        service = self.iserver.subscription_service
+        if session is not None and session.state != SessionState.Closed and isinstance(service, GuardedSubscriptionService):
+            await service.put_to_sleep(session.session_id)  # kept for a comeback, but no work per change meanwhile
+        transport = self._transport
+        if transport is not None and not transport.is_closing():
+            # The session timed out on an open connection: its client hung or its cable was pulled
+            # (no TCP reset). Nothing would ever close the connection; a live client reconnects.
+            transport.close()
 
     async def _browse(self, typeid: ua.NodeId, requesthdr: Any, seqhdr: Any, body: Buffer) -> bool:
         """Browse and BrowseNext with continuation points (asyncua ignores RequestedMaxReferencesPerNode)."""

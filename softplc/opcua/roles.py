@@ -21,6 +21,7 @@ class SessionUser(User):
     """An authenticated OPC UA session's user: asyncua's User plus our role."""
 
     access: Role = Role.VIEWER
+    peer: str = ""  # the client's address, set when its session is activated
 
 
 def role_of(user: User | None) -> Role | None:

@@ -197,7 +197,8 @@ class Pki:
 
 
 class ClientCertificateValidator:
-    """asyncua's certificate hook: only trusted, unexpired client certificates may open a session.
+    """asyncua's certificate hook: only trusted, unexpired client certificates, issued for the
+    ApplicationUri the client describes itself with, may open a session.
 
     `secured` tells whether a certificate came with a Sign/SignAndEncrypt channel; on a
     SecurityPolicy None channel the certificate proves nothing and is ignored (OPC UA Part 4).
@@ -221,6 +222,15 @@ class ClientCertificateValidator:
             log.warning("refused untrusted client certificate %s (SHA-256 %s), kept in %s; "
                         "trust it with: softplc opcua trust %s", common_name(certificate), fingerprint(der), path, fingerprint(der)[:16])
             raise ServiceError(ua.StatusCodes.BadCertificateUntrusted)
+        # Part 4, CreateSession: the certificate must be the client application's own (the URI in
+        # its subjectAltName equals the ApplicationUri the client describes itself with). Checked
+        # after trust, in the order of Part 4's certificate validation steps.
+        claimed = application.ApplicationUri if application is not None else None
+        uris = _uris(certificate)
+        if claimed not in uris:
+            log.warning("refused client certificate %s (%s): it is for %s, the client says it is %r", common_name(certificate),
+                        fingerprint(der)[:16], ", ".join(uris) or "no application URI", claimed)
+            raise ServiceError(ua.StatusCodes.BadCertificateUriInvalid)
 
 
 class SecuredChannels:

@@ -33,12 +33,14 @@ from asyncua.common.callback import CallbackType
 from softplc import __version__
 from softplc.opcua.address_space import AddressSpaceBuilder, plan_folders, tag_node_id
 from softplc.opcua.browsing import MAX_CONTINUATION_POINTS
-from softplc.opcua.commands import CommandsDoor  # alarms branch: the door to runtime.commands
-from softplc.opcua.conditions import AlarmConditions  # alarms branch: Part 9 conditions
+from softplc.opcua.commands import CommandsDoor  # the door to runtime.commands
+from softplc.opcua.conditions import AlarmConditions  # Part 9 conditions
+from softplc.opcua.history import MAX_NODES_PER_HISTORY_READ, HistoryProvider, NoHistory, TagHistoryService
 from softplc.opcua.publisher import Publisher
 from softplc.opcua.roles import RolePermissions
 from softplc.opcua.scheduling import ScanGuard
 from softplc.opcua.security import ClientCertificateValidator, Pki, SecuredChannels
+from softplc.opcua.server_status import ServerStatusClock
 from softplc.opcua.settings import POLICIES, POLICY_NONE, POLICY_TEXT, OpcUaSettings
 from softplc.opcua.transport import ConnectionLimits, GuardedServer
 from softplc.opcua.user_manager import SoftplcUserManager
@@ -57,8 +59,9 @@ class OpcUaServer:
 
     name = "opcua"
 
-    def __init__(self, settings: OpcUaSettings | None = None) -> None:
+    def __init__(self, settings: OpcUaSettings | None = None, *, history: HistoryProvider | None = None) -> None:
         self.settings = settings or OpcUaSettings()
+        self.history: HistoryProvider = history or NoHistory()  # a historian plugs in here (history.py)
         self.endpoint = self.settings.endpoint
         self.namespace_index = 0
         self.startup_seconds = 0.0  # from start() to listening with every tag in place
@@ -69,8 +72,9 @@ class OpcUaServer:
         self.publisher: Publisher | None = None
         self.writes: TagAttributeService | None = None
         self.user_manager: SoftplcUserManager | None = None
-        self.conditions: AlarmConditions | None = None  # alarms branch
-        self.commands_door: CommandsDoor | None = None  # alarms branch
+        self.conditions: AlarmConditions | None = None
+        self.commands_door: CommandsDoor | None = None
+        self.server_clock: ServerStatusClock | None = None
 
     @property
     def namespace_uri(self) -> str:
@@ -112,8 +116,8 @@ class OpcUaServer:
         server.manufacturer_name = "softplc"
         server.application_type = ua.ApplicationType.Server
         server.set_endpoint(settings.endpoint)
-        # The 1 s CurrentTime task would make stop() wait up to a second; a value callback
-        # gives clients the current time on every read instead.
+        # asyncua's 1 s CurrentTime task would make stop() wait up to a second; ServerStatusClock
+        # (installed once the server runs) answers reads and subscribers instead.
         server.disable_clock(True)
         iserver = server.iserver
         iserver.allow_remote_admin = False
@@ -140,6 +144,9 @@ class OpcUaServer:
             self.server = None
             raise AdapterError(f"OPC UA cannot listen on {settings.host}:{settings.port}: {error.strerror or error}") from None
         self._after_listen(server)
+        self.server_clock = ServerStatusClock(server.iserver.aspace, runtime.clock)
+        await self.server_clock.install()
+        self.server_clock.run()
         assert self.publisher is not None
         self.publisher.run()
         self.startup_seconds = time.perf_counter() - started
@@ -148,29 +155,28 @@ class OpcUaServer:
 
     async def _build_server(self, server: Server, runtime: Runtime) -> None:
         settings = self.settings
-        iserver = server.iserver
         await server.init()
         await server.set_application_uri(settings.application_uri)
         await server.set_build_info("urn:softplc", "softplc", "softplc", __version__, __version__, datetime.now(timezone.utc))
-        iserver.set_attribute_value_callback(
-            ua.NodeId(ua.ObjectIds.Server_ServerStatus_CurrentTime), ua.AttributeIds.Value, _current_time
-        )
         # Advertise the request limits the Write service enforces, so clients split big requests.
         for limit, value in ((ua.ObjectIds.Server_ServerCapabilities_OperationLimits_MaxNodesPerRead, MAX_NODES_PER_READ),
-                             (ua.ObjectIds.Server_ServerCapabilities_OperationLimits_MaxNodesPerWrite, MAX_NODES_PER_WRITE)):
+                             (ua.ObjectIds.Server_ServerCapabilities_OperationLimits_MaxNodesPerWrite, MAX_NODES_PER_WRITE),
+                             (ua.ObjectIds.Server_ServerCapabilities_OperationLimits_MaxNodesPerHistoryReadData, MAX_NODES_PER_HISTORY_READ)):
             await server.get_node(ua.NodeId(limit)).write_value(ua.Variant(value, ua.VariantType.UInt32))
         await server.get_node(ua.NodeId(ua.ObjectIds.Server_ServerCapabilities_MaxBrowseContinuationPoints)).write_value(
             ua.Variant(MAX_CONTINUATION_POINTS, ua.VariantType.UInt16))
         self.namespace_index = await server.register_namespace(settings.namespace)
         await self._configure_security(server)
         await self._build_address_space(runtime)
-        # alarms branch: Alarms & Conditions (softplc/opcua/conditions.py), Objects/Commands (commands.py)
+        # Alarms & Conditions (softplc/opcua/conditions.py), Objects/Commands (commands.py)
         self.conditions = await AlarmConditions.install(server, runtime, self.namespace_index)
         self.commands_door = await CommandsDoor.install(server, runtime.commands, self.namespace_index)
 
     async def stop(self) -> None:
-        if self.conditions is not None:  # alarms branch
+        if self.conditions is not None:
             await self.conditions.stop()
+        if self.server_clock is not None:
+            await self.server_clock.stop()
         if self.publisher is not None:
             await self.publisher.stop()
         if self.server is not None:
@@ -228,10 +234,11 @@ class OpcUaServer:
         self.publisher.start()  # listen first: a change made while we build is pushed after
         builder = AddressSpaceBuilder(iserver.aspace, ns)
         roots = plan_folders((tag.definition for tag in db), self.settings.folder_size)
-        await builder.build(roots, {tag.name: tag for tag in db})
+        await builder.build(roots, {tag.name: tag for tag in db}, historized=self.history.historized)
         self.node_count = builder.node_count
         self.writes = TagAttributeService(iserver.aspace, db, ns)
         iserver.attribute_service = self.writes
+        iserver.history_manager = TagHistoryService(iserver, db, ns, self.history)
         # UserAccessLevel per session role: asyncua's attribute service reads without the session.
         self.server.subscribe_server_callback(CallbackType.PostRead, self.writes.user_access_level)
 
@@ -245,11 +252,6 @@ class OpcUaServer:
             for description in server.iserver.endpoints:
                 description.EndpointUrl = self.endpoint
                 description.Server.DiscoveryUrls = [self.endpoint]
-
-
-def _current_time(node_id: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
-    now = datetime.now(timezone.utc)
-    return ua.DataValue(ua.Variant(now, ua.VariantType.DateTime), SourceTimestamp=now, ServerTimestamp=now)
 
 
 async def _quiet_stop(server: Server) -> None:

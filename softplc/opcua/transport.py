@@ -42,6 +42,7 @@ from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
 from asyncua.ua.ua_binary import header_from_binary, uatcp_to_binary
 
 from softplc.peers import PeerLog, peer_host
+from softplc.opcua.methods import CheckedMethodService
 from softplc.opcua.processor import DiscoveryOnlyNone, GuardedProcessor, PolicyRefused
 from softplc.opcua.scheduling import ScanGuard
 from softplc.opcua.security import SecuredChannels
@@ -280,6 +281,9 @@ class GuardedServer(Server):
         service = GuardedSubscriptionService(self.iserver.aspace, iserver=self.iserver, guard=guard)
         self.iserver.subscription_service = service
         self.iserver.isession.subscription_service = service
+        # Call with Part 4's statuses for unknown objects and methods.
+        self.iserver.method_service.stop()
+        self.iserver.method_service = CheckedMethodService(self.iserver.aspace)
 
     async def start(self) -> None:
         # Server.start of asyncua 2.1.0, with our binary server and policy wrappers.

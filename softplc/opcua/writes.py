@@ -18,8 +18,9 @@ session's Write goes through) by `TagAttributeService`, which answers each item 
     BadIndexRangeInvalid      an IndexRange (tags are scalars)
 
 The access rules are the tag database's (`TagDatabase.validate`, `softplc.roles`), the same for
-every protocol; each item of a Write is submitted with the session's `Origin` (user, peer address,
-role), so the database reports it, accepted or refused, to its write listeners (the audit trail).
+every protocol; each item of a Write is submitted with the session's `Origin` (user, the
+client's address, role), so the database reports it, accepted or refused, to its write
+listeners (the audit trail).
 
 UserAccessLevel, as read by a client session, tells what *its* role may do (a PostRead hook,
 `TagAttributeService.user_access_level`): CurrentRead|CurrentWrite (3) on the tags the role may
@@ -50,7 +51,6 @@ from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AddressSpace, AttributeService
 
-from softplc.opcua.commands import current_origin
 from softplc.opcua.roles import role_of
 from softplc.opcua.variants import WriteStatus, value_from_variant
 from softplc.roles import Role
@@ -116,8 +116,8 @@ class TagAttributeService(AttributeService):
         if len(items) > MAX_NODES_PER_WRITE:
             raise ServiceError(ua.StatusCodes.BadTooManyOperations)
         role = role_of(user)
-        # The session's user, role and peer address (softplc/opcua/commands.py); the server's own writes have none.
-        origin = current_origin() or Origin("opcua", getattr(user, "name", None) or ("internal" if role is None else "anonymous"), role=role)
+        origin = Origin("opcua", getattr(user, "name", None) or ("internal" if role is None else "anonymous"),
+                        peer=getattr(user, "peer", ""), role=role)
         results: list[ua.StatusCode | None] = [None] * len(items)
         batch: list[tuple[str, Any]] = []
         batch_indexes: list[int] = []
@@ -136,13 +136,11 @@ class TagAttributeService(AttributeService):
             except WriteStatus as refused:
                 results[index] = ua.StatusCode(refused.code)
                 rule = _CODE_RULES.get(refused.code, Rule.INVALID_REQUEST)
-                self.db.refused(origin, item.NodeId.Identifier, _variant_value(item), rule, refused.detail)
-                log.info("%s: write %s refused: %s", origin, item.NodeId.Identifier, refused.detail)
+                self._refused(origin, item, rule, refused.detail)
                 continue
             except WriteRejected as rejected:
                 results[index] = ua.StatusCode(_RULE_CODES[rejected.rule])
-                self.db.refused(origin, item.NodeId.Identifier, _variant_value(item), rejected.rule, rejected.detail)
-                log.info("%s: write %s refused: %s", origin, item.NodeId.Identifier, rejected.detail)
+                self._refused(origin, item, rejected.rule, rejected.detail)
                 continue
             batch.append((name, value))
             batch_indexes.append(index)
@@ -161,6 +159,12 @@ class TagAttributeService(AttributeService):
         self.accepted += accepted
         self.rejected += len(items) - accepted
         return [status if status is not None else ua.StatusCode(ua.StatusCodes.BadInternalError) for status in results]
+
+    def _refused(self, origin: Origin, item: ua.WriteValue, rule: Rule, detail: str) -> None:
+        """Report an item refused here to the write listeners, and log it."""
+        name = printable(item.NodeId.Identifier)
+        self.db.refused(origin, name, printable(_variant_value(item)), rule, detail)
+        log.info("%s: write %s refused: %s", origin, name, detail)
 
     def _not_ours(self, node_id: ua.NodeId) -> ua.StatusCode:
         if node_id in self._aspace:
@@ -190,6 +194,20 @@ class TagAttributeService(AttributeService):
         if data.StatusCode is not None and not data.StatusCode.is_good():
             raise WriteStatus(ua.StatusCodes.BadWriteNotSupported, "clients cannot write a tag's quality")
         return name, value_from_variant(tag.definition, data.Value)
+
+
+def printable(value: Any) -> Any:
+    """`value` with the undecodable bytes of a client's string shown as \\xNN (others unchanged).
+
+    asyncua decodes every String with surrogateescape: invalid UTF-8 from a client arrives as
+    lone surrogates, which a log file or an audit trail could not encode.
+    """
+    if isinstance(value, str):
+        try:
+            value.encode("utf-8")
+        except UnicodeEncodeError:
+            return value.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    return value
 
 
 def _variant_value(item: ua.WriteValue) -> Any:

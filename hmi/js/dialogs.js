@@ -1,0 +1,244 @@
+// Dialogs: writing a tag (value → confirmation "old → new unit" → result or the refusal's
+// rule), logging in, and the live details of a robot, a task or any set of tags.
+
+import { el, clear, setText } from './dom.js';
+import { writeTag, post } from './api.js';
+import { formatValue, formatWithUnit, formatRange, qualityName } from './format.js';
+
+/** A new modal <dialog> with `node`, removed when closed (one at a time: an open one is closed). */
+function show(node, className) {
+  for (const open of document.querySelectorAll('dialog.dialog[open]')) open.close();
+  // A fresh element each time: a closing dialog's "close" event never reaches the next one's listeners.
+  const box = el('dialog', { class: `dialog ${className || ''}` }, node);
+  document.body.append(box);
+  box.addEventListener('close', () => box.remove(), { once: true });
+  box.showModal();
+  return box;
+}
+
+function heading(text, onClose) {
+  return el('h2', {}, el('span', { text }), el('button', { type: 'button', class: 'close-x', 'aria-label': 'Close', text: '×', onclick: onClose }));
+}
+
+function exactWithUnit(value, unit) {
+  const text = typeof value === 'number' ? String(value) : formatValue(value);
+  return unit ? `${text} ${unit}` : text;
+}
+
+function parseInput(meta, text) {
+  if (meta.type === 'string') return text;
+  const trimmed = text.trim();
+  const number = Number(trimmed);
+  // Not a number: send the text as it is, so the server says what is wrong with it.
+  return trimmed !== '' && Number.isFinite(number) ? number : text;
+}
+
+/**
+ * Write a tag after a confirmation. `preset` (a value) skips straight to the confirmation (a
+ * mimic's button). Resolves true when the runtime accepted the write.
+ */
+export function openWrite(ctx, meta, preset) {
+  return new Promise((resolve) => {
+    let result = false;
+    let box = null;
+    const finish = () => { if (box) box.close(); };
+    const unit = meta.unit || '';
+    const current = () => ctx.live.get(meta.name);
+    let watch = null;
+
+    const form = el('form', { method: 'dialog', novalidate: true });
+    const currentText = el('span', { class: 'live-value num' });
+    const showCurrent = () => {
+      const item = current();
+      setText(currentText, item ? `${formatWithUnit(item.v, unit)} (${qualityName(item.q)})` : formatWithUnit(meta.value, unit));
+    };
+    watch = ctx.live.watch([meta.name], showCurrent);
+    showCurrent();
+
+    let input;
+    const entry = el('div');
+    if (meta.type === 'bool') {
+      const now = current() ? current().v : meta.value;
+      const make = (value) => el('label', {}, el('input', { type: 'radio', name: 'value', value: String(value), checked: value === !now }), value ? 'true' : 'false');
+      input = el('div', { class: 'choices', role: 'radiogroup', 'aria-label': 'New value' }, make(true), make(false));
+      entry.append(el('label', { text: 'New value' }), input);
+    } else {
+      input = el('input', { type: 'text', name: 'value', autocomplete: 'off', inputmode: meta.type === 'string' ? 'text' : 'decimal', id: 'write-value' });
+      const now = current() ? current().v : meta.value;
+      input.value = now === undefined || now === null ? '' : String(now);
+      entry.append(el('label', { for: 'write-value', text: `New value${unit ? ` (${unit})` : ''}` }), input);
+    }
+    const readValue = () => {
+      if (meta.type === 'bool') {
+        const checked = input.querySelector('input:checked');
+        return checked ? checked.value === 'true' : null;
+      }
+      return parseInput(meta, input.value);
+    };
+
+    const facts = el('dl', { class: 'kv small' },
+      el('dt', { text: 'Now' }), el('dd', {}, currentText),
+      el('dt', { text: 'Type' }), el('dd', { text: meta.type }),
+    );
+    const range = formatRange(meta);
+    if (range) facts.append(el('dt', { text: 'Range' }), el('dd', { text: `${range}${unit ? ` ${unit}` : ''}` }));
+    const message = el('div', { role: 'alert' });
+    const stepValue = el('div', {}, entry);
+    const change = el('div', { class: 'change num' });
+    const stepConfirm = el('div', { hidden: true }, el('p', { class: 'muted small', text: 'Please confirm the write:' }), change);
+    const back = el('button', { type: 'button', class: 'btn secondary', text: 'Back', hidden: true });
+    const next = el('button', { type: 'submit', class: 'btn', text: 'Review' });
+    const cancel = el('button', { type: 'button', class: 'btn secondary', text: 'Cancel', onclick: finish });
+    let pending = null;
+
+    const toConfirm = (value) => {
+      pending = value;
+      clear(change);
+      const old = current() ? current().v : meta.value;
+      change.append(
+        el('span', { class: 'old', text: formatWithUnit(old, unit) }),
+        el('span', { class: 'arrow', text: '→' }),
+        el('strong', { class: 'new', text: exactWithUnit(value, unit) }),  // exactly what will be written
+      );
+      clear(message);
+      stepValue.hidden = true;
+      stepConfirm.hidden = false;
+      back.hidden = preset !== undefined;
+      next.textContent = 'Confirm write';
+      next.dataset.step = 'confirm';
+      next.focus();
+    };
+    const toValue = () => {
+      stepValue.hidden = false;
+      stepConfirm.hidden = true;
+      back.hidden = true;
+      next.textContent = 'Review';
+      next.dataset.step = 'value';
+    };
+    back.addEventListener('click', toValue);
+
+    form.addEventListener('submit', async (event) => {
+      event.preventDefault();
+      if (next.dataset.step !== 'confirm') {
+        const value = readValue();
+        if (value === null) return;
+        toConfirm(value);
+        return;
+      }
+      next.disabled = true;
+      clear(message);
+      try {
+        const answer = await writeTag(meta.name, pending);
+        const item = answer.results && answer.results[0];
+        if (item && item.ok) {
+          result = true;
+          message.append(el('div', { class: 'done', text: `Written: ${exactWithUnit(item.value, unit)}. It applies at the next scan.` }));
+          next.hidden = true;
+          back.hidden = true;
+          cancel.textContent = 'Close';
+          setTimeout(finish, 1200);
+        } else {
+          const rule = item ? item.rule : 'refused';
+          const detail = item ? item.detail : (answer.error || '');
+          message.append(el('div', { class: 'refusal', 'data-rule': rule, text: `Refused — ${rule}: ${detail}` }));
+          if (preset === undefined) toValue(); else next.hidden = true;
+        }
+      } catch (error) {
+        message.append(el('div', { class: 'refusal', text: `Not written: ${error.message}` }));
+      } finally {
+        next.disabled = false;
+      }
+    });
+
+    form.append(
+      heading(`Write ${meta.name}`, finish),
+      meta.description ? el('p', { class: 'desc', text: meta.description }) : null,
+      facts, stepValue, stepConfirm, message,
+      el('div', { class: 'actions' }, cancel, back, next),
+    );
+    box = show(form);
+    box.addEventListener('close', () => { if (watch) watch.close(); resolve(result); }, { once: true });
+    if (preset !== undefined) toConfirm(preset);
+    else if (input.focus) (meta.type === 'bool' ? input.querySelector('input') : input).focus();
+  });
+}
+
+/** Log in; resolves true on success (the caller refreshes the session). */
+export function openLogin(ctx) {
+  return new Promise((resolve) => {
+    let ok = false;
+    let box = null;
+    const close = () => box && box.close();
+    const user = el('input', { type: 'text', id: 'login-user', name: 'user', autocomplete: 'username', required: true });
+    const password = el('input', { type: 'password', id: 'login-password', name: 'password', autocomplete: 'current-password', required: true });
+    const message = el('div', { role: 'alert' });
+    const submit = el('button', { type: 'submit', class: 'btn', text: 'Log in' });
+    const form = el('form', { method: 'dialog' },
+      heading('Log in', close),
+      el('p', { class: 'muted small', text: 'The users of the runtime (softplc users add NAME --role ROLE), the same as for OPC UA.' }),
+      el('label', { for: 'login-user', text: 'User' }), user,
+      el('label', { for: 'login-password', text: 'Password' }), password,
+      message,
+      el('div', { class: 'actions' }, el('button', { type: 'button', class: 'btn secondary', text: 'Cancel', onclick: close }), submit),
+    );
+    form.addEventListener('submit', async (event) => {
+      event.preventDefault();
+      submit.disabled = true;
+      clear(message);
+      try {
+        await post('/api/login', { user: user.value, password: password.value });
+        ok = true;
+        close();
+      } catch (error) {
+        message.append(el('div', { class: 'refusal', text: error.message }));
+      } finally {
+        submit.disabled = false;
+      }
+    });
+    box = show(form);
+    box.addEventListener('close', () => resolve(ok), { once: true });
+    user.focus();
+  });
+}
+
+/** A live list of tags (a robot's, a task's...) with a write button where the role may write. */
+export function openDetails(ctx, title, tags, subtitle) {
+  const rows = new Map();
+  const body = el('tbody');
+  for (const meta of tags) {
+    const value = el('span', { class: 'live-value' });
+    const quality = el('span', { class: 'qual' });
+    const write = meta.writable
+      ? el('button', { type: 'button', class: 'btn small secondary', text: 'Write…', onclick: () => openWrite(ctx, meta).then(() => openDetails(ctx, title, tags, subtitle)) })
+      : null;
+    body.append(el('tr', { 'data-tag': meta.name },
+      el('td', {}, el('strong', { text: meta.name }), meta.description ? el('span', { class: 'd', text: meta.description }) : null),
+      el('td', { class: 'v' }, value, el('br'), quality),
+      el('td', {}, write),
+    ));
+    rows.set(meta.name, { meta, value, quality });
+  }
+  const update = (names) => {
+    for (const name of names) {
+      const row = rows.get(name);
+      const item = ctx.live.get(name);
+      if (!row || !item) continue;
+      setText(row.value, formatWithUnit(item.v, row.meta.unit));
+      row.value.className = `live-value ${item.q === 2 ? 'q-bad' : item.q === 1 ? 'q-uncertain' : ''}`;
+      setText(row.quality, qualityName(item.q));
+      row.quality.className = `qual ${qualityName(item.q)}`;
+    }
+  };
+  const watch = ctx.live.watch([...rows.keys()], update);
+  update([...rows.keys()]);
+  let box = null;
+  const node = el('div', { class: 'body' },
+    heading(title, () => box && box.close()),
+    subtitle ? el('p', { class: 'muted small', text: subtitle }) : null,
+    el('table', { class: 'detail-list' }, body),
+  );
+  box = show(node, 'drawer');
+  box.addEventListener('close', () => watch.close(), { once: true });
+}
+
+export { formatValue };

@@ -1,0 +1,209 @@
+// The page shell: session, navigation built from the server's page list, the live channel, the
+// connection and runtime state in the header, the banner slot, and the router (#/PAGE?k=v).
+//
+// A page is an ES module exporting `mount(root, context)` that returns an unmount function;
+// `context` = {live, session, params, openWrite(meta, preset), openDetails(title, tags, subtitle),
+// navigate(hash)}. Other modules add pages, banners and API routes on the server (softplc/hmi/shell.py).
+
+import { el, clear, setText } from './dom.js';
+import { get, post, setCsrf, forgetMeta } from './api.js';
+import { Live } from './live.js';
+import { openWrite, openLogin, openDetails } from './dialogs.js';
+
+const state = { session: null, live: null, unmount: null, pageId: null, banners: [], failed: false };
+
+function context(params) {
+  return {
+    live: state.live,
+    session: state.session,
+    params,
+    openWrite: (meta, preset) => openWrite(contextBase(), meta, preset),
+    openDetails: (title, tags, subtitle) => openDetails(contextBase(), title, tags, subtitle),
+    navigate: (hash) => { location.hash = hash; },
+  };
+}
+function contextBase() { return { live: state.live, session: state.session }; }
+
+async function loadSession() {
+  const session = await get('/api/session');
+  state.session = session;
+  setCsrf(session.csrf);
+  document.title = `${session.plant.name} — softplc HMI`;
+  setText(document.getElementById('plant-name'), session.plant.name);
+  document.getElementById('plant-name').title = session.plant.description || '';
+  return session;
+}
+
+function renderNav() {
+  const nav = clear(document.getElementById('nav'));
+  let group = null;
+  for (const page of state.session.pages) {
+    if (page.group !== group && nav.childElementCount) nav.append(el('span', { class: 'group-sep', 'aria-hidden': 'true' }));
+    group = page.group;
+    nav.append(el('a', { href: `#/${page.id}`, 'data-page': page.id, text: page.title }));
+  }
+  markNav();
+}
+
+function markNav() {
+  for (const link of document.querySelectorAll('#nav a')) {
+    if (link.dataset.page === state.pageId) link.setAttribute('aria-current', 'page');
+    else link.removeAttribute('aria-current');
+  }
+}
+
+function renderUser() {
+  const box = clear(document.getElementById('user-box'));
+  const session = state.session;
+  if (session.user) {
+    box.append(
+      el('span', { class: 'who', 'data-role': session.role, text: `${session.user} · ${session.role}` }),
+      el('button', { type: 'button', text: 'Log out', onclick: logout }),
+    );
+  } else {
+    if (session.role) box.append(el('span', { class: 'who', 'data-role': session.role, text: `visitor · ${session.role}` }));
+    box.append(el('button', { type: 'button', text: 'Log in', onclick: login }));
+  }
+}
+
+async function login() {
+  if (await openLogin(contextBase())) await restart();
+}
+
+async function logout() {
+  try { await post('/api/logout', {}); } catch { /* the session is gone anyway */ }
+  await restart();
+}
+
+/** After a login, a logout or a runtime restart: new identity, new page list, fresh values. */
+async function restart() {
+  forgetMeta();
+  await start();
+  state.failed = false;
+  state.live.reconnect();
+}
+
+function route() {
+  const hash = location.hash.replace(/^#\/?/, '');
+  const [id, query] = hash.split('?');
+  const pages = state.session.pages;
+  const page = pages.find((p) => p.id === id) || pages[0];
+  const params = { ...page.params, ...Object.fromEntries(new URLSearchParams(query || '')) };
+  show(page, params);
+}
+
+async function show(page, params) {
+  if (state.unmount) {
+    try { state.unmount(); } catch (error) { console.error(error); }
+    state.unmount = null;
+  }
+  state.pageId = page.id;
+  markNav();
+  const root = clear(document.getElementById('page'));
+  root.dataset.page = page.id;
+  delete root.dataset.ready;  // the page sets it again once it shows live values
+  try {
+    const module = await import(page.module);
+    if (state.pageId !== page.id) return;  // another page was opened meanwhile
+    state.unmount = await module.mount(root, context(params)) || null;
+  } catch (error) {
+    console.error(error);
+    root.append(el('div', { class: 'error-banner', role: 'alert', text: `This page could not be shown: ${error.message}` }));
+  }
+}
+
+function showLoginPage() {
+  const root = clear(document.getElementById('page'));
+  clear(document.getElementById('nav'));
+  root.append(el('div', { class: 'panel login-page' },
+    el('h1', { text: 'Log in to see the plant' }),
+    el('p', { class: 'muted', text: 'This HMI does not let visitors look without logging in.' }),
+    el('button', { type: 'button', class: 'btn', text: 'Log in', onclick: login }),
+  ));
+}
+
+async function loadBanners() {
+  const slot = clear(document.getElementById('banners'));
+  for (const unmount of state.banners) { try { unmount(); } catch { /* ignore */ } }
+  state.banners = [];
+  for (const module of state.session.banners || []) {
+    try {
+      const banner = await import(module);
+      const node = el('div');
+      slot.append(node);
+      const unmount = await banner.mount(node, context({}));
+      if (unmount) state.banners.push(unmount);
+    } catch (error) {
+      console.error('banner', module, error);
+    }
+  }
+}
+
+function watchHeader() {
+  const chip = document.getElementById('runtime-state');
+  const offline = document.getElementById('offline');
+  const connection = document.getElementById('connection');
+  let countdown = null;
+  state.live.addEventListener('state', (event) => {
+    const { state: now, reason, retryIn } = event.detail;
+    document.body.classList.toggle('offline', now === 'disconnected');
+    clearInterval(countdown);
+    if (now === 'live') {
+      connection.className = 'chip conn ok';
+      setText(connection, 'live');
+      offline.hidden = true;
+    } else if (now === 'connecting') {
+      connection.className = 'chip conn warn';
+      setText(connection, 'connecting…');
+    } else {
+      connection.className = 'chip conn bad';
+      setText(connection, 'disconnected');
+      offline.hidden = false;
+      let left = Math.ceil(retryIn || 0);
+      const say = () => setText(offline, `Disconnected from the runtime (${reason}). The values shown are not live. Reconnecting${left > 0 ? ` in ${left} s` : ''}…`);
+      say();
+      countdown = setInterval(() => { left -= 1; say(); if (left <= 0) clearInterval(countdown); }, 1000);
+    }
+  });
+  state.live.addEventListener('hello', async (event) => {
+    // A new runtime (new sessions, maybe new tags), or the first page load found it down.
+    if (event.detail.restarted || state.failed) await restart();
+  });
+  state.live.watch(['_sys.state', '_sys.error'], () => {
+    const item = state.live.get('_sys.state');
+    const error = state.live.get('_sys.error');
+    const value = item ? String(item.v) : '…';
+    chip.className = `chip ${value === 'RUNNING' ? 'ok' : value === 'ERROR' ? 'bad' : 'warn'}`;
+    setText(chip, value);
+    chip.title = error && error.v ? `Runtime error: ${error.v}` : 'Runtime state';
+  });
+}
+
+async function start() {
+  const session = await loadSession();
+  renderUser();
+  if (session.login_required) {
+    showLoginPage();
+    return;
+  }
+  renderNav();
+  await loadBanners();
+  route();
+}
+
+async function boot() {
+  state.live = new Live();
+  watchHeader();
+  window.addEventListener('hashchange', () => { if (state.session && !state.session.login_required) route(); });
+  state.live.connect();  // at once: the socket opens while the session and the page load
+  try {
+    await start();
+  } catch (error) {
+    state.failed = true;
+    const root = clear(document.getElementById('page'));
+    root.append(el('div', { class: 'error-banner', role: 'alert', text: `The runtime cannot be reached: ${error.message}. It reconnects by itself.` }));
+  }
+  window.softplcHmi = state;  // for debugging and tests: the live channel and session
+}
+
+boot();

@@ -1,0 +1,148 @@
+// The overview's side: one card per task (buffer levels, fill rates, weight, goals, its robots)
+// and one line per robot (state, task, load), with the bottleneck and the next task marked.
+
+import { el, setText } from '../dom.js';
+import { formatNumber, formatWithUnit, NAVSTATE_CLASS, CURRLOC_TEXT } from '../format.js';
+import { taskColor, robotColor } from './floor.js';
+
+function level(label, kind) {
+  const fill = el('div', { class: `fill ${kind}` });
+  const text = el('span', { class: 'num live-value' });
+  return { node: el('div', { class: 'level' }, el('div', { class: 'label' }, el('span', { text: label }), text), el('div', { class: 'track' }, fill)), fill, text };
+}
+
+function figure(label) {
+  const value = el('b', { class: 'num live-value', text: '—' });
+  return { node: el('div', {}, el('span', { class: 'muted', text: label }), value), value };
+}
+
+export class TaskCards {
+  constructor(fleet, live, onOpen) {
+    this.fleet = fleet;
+    this.live = live;
+    this.cards = fleet.tasks.map((task, index) => this._card(task, index, onOpen));
+    this.node = el('div', { class: 'task-cards side-stack' }, ...this.cards.map((card) => card.node));
+  }
+
+  names() {
+    const names = [];
+    for (const task of this.fleet.tasks) names.push(...Object.values(task.tags));
+    for (const robot of this.fleet.robots) for (const field of ['tcurr', 'currloc', 'status']) if (robot.tags[field]) names.push(robot.tags[field]);
+    return names;
+  }
+
+  _card(task, index, onOpen) {
+    const input = level('Input buffer', 'in');
+    const output = level('Output storage', 'out');
+    const rate = figure('fill rate');
+    const weight = figure('weight Tw');
+    const goals = figure('goals');
+    const badges = el('span', { class: 'badges' });
+    const robots = el('div', { class: 'small muted' });
+    const node = el('section', { class: 'panel task-card', 'data-task': task.id, tabindex: 0, role: 'button', 'aria-label': `${task.name}: details` },
+      el('div', { class: 'title' }, el('span', { class: 'task-dot' }), el('h2', { text: `${task.name}` }), el('span', { class: 'muted small', text: task.id }), badges),
+      input.node, output.node,
+      el('div', { class: 'task-figures' }, rate.node, weight.node, goals.node),
+      robots,
+    );
+    node.querySelector('.task-dot').style.background = taskColor(index);  // CSSOM: allowed by the CSP, unlike style=""
+    node.addEventListener('click', () => onOpen(task));
+    node.addEventListener('keydown', (event) => { if (event.key === 'Enter') onOpen(task); });
+    return { task, index, node, input, output, rate, weight, goals, badges, robots };
+  }
+
+  update() {
+    const value = (name) => { const item = name ? this.live.get(name) : undefined; return item ? item.v : undefined; };
+    let fullest = null, lightest = null;
+    for (const card of this.cards) {
+      const tags = card.task.tags;
+      this._level(card.input, value(tags.iBM), value(tags.iBC), value(tags.iBL), true);
+      this._level(card.output, value(tags.qSM), value(tags.qSC), value(tags.qSL), false);
+      setText(card.rate.value, tags.iFr ? `${formatNumber(value(tags.iFr) ?? NaN, 1)}/min` : '—');
+      setText(card.weight.value, tags.Tw && typeof value(tags.Tw) === 'number' ? formatNumber(value(tags.Tw), 2) : '—');
+      setText(card.goals.value, tags.goals && value(tags.goals) !== undefined ? String(value(tags.goals)) : '—');
+      const inLevel = value(tags.iBL);
+      if (typeof inLevel === 'number' && (!fullest || inLevel > fullest.level)) fullest = { card, level: inLevel };
+      const tw = value(tags.Tw);
+      if (typeof tw === 'number' && (!lightest || tw < lightest.tw)) lightest = { card, tw, tie: false };
+      else if (typeof tw === 'number' && lightest && tw === lightest.tw) lightest.tie = true;
+      const serving = [];
+      this.fleet.robots.forEach((robot) => {
+        const current = value(robot.tags.tcurr);
+        const where = value(robot.tags.currloc) || 0;
+        if (current === card.task.number && (where > 0 || value(robot.tags.status))) serving.push(`${robot.id} ${CURRLOC_TEXT[where] || ''}`.trim());
+      });
+      setText(card.robots, serving.length ? `Robots: ${serving.join(' · ')}` : 'No robot on this task now');
+    }
+    for (const card of this.cards) {
+      const bottleneck = fullest && fullest.card === card && fullest.level >= 50;
+      const next = lightest && !lightest.tie && lightest.card === card && this.cards.length > 1;
+      const key = `${bottleneck}|${next}`;
+      if (card.badges.dataset.key === key) continue;
+      card.badges.dataset.key = key;
+      card.badges.replaceChildren(
+        ...(bottleneck ? [el('span', { class: 'badge bottleneck', title: 'The fullest input buffer: production here is the first to stall', text: 'bottleneck' })] : []),
+        ...(next ? [el('span', { class: 'badge next', title: 'Lowest task weight: the next free robot goes here', text: 'next robot' })] : []),
+      );
+    }
+  }
+
+  _level(bar, items, capacity, percent, input) {
+    let level = percent;
+    if (typeof level !== 'number' && typeof items === 'number' && typeof capacity === 'number' && capacity > 0) level = 100 * items / capacity;
+    if (typeof level !== 'number') { setText(bar.text, '—'); return; }
+    const clamped = Math.max(0, Math.min(100, level));
+    bar.fill.style.width = `${clamped}%`;
+    bar.fill.classList.toggle('high', input && level >= 80 && level < 95);
+    bar.fill.classList.toggle('full', input && level >= 95);
+    const count = typeof items === 'number' ? (typeof capacity === 'number' ? `${items} / ${capacity} items · ` : `${items} items · `) : '';
+    setText(bar.text, `${count}${formatNumber(level, 0)} %`);
+  }
+}
+
+export class RobotList {
+  constructor(fleet, live, onOpen) {
+    this.fleet = fleet;
+    this.live = live;
+    this.rows = fleet.robots.map((robot, index) => {
+      const state = el('span', { class: 'chip idle', text: 'idle' });
+      const line2 = el('div', { class: 'line2' });
+      const swatch = el('span', { class: 'swatch', text: robot.id.replace(/^[a-z]+/i, '') || robot.id });
+      swatch.style.background = robotColor(index);
+      const node = el('div', { class: 'robot-card', 'data-robot': robot.id, tabindex: 0, role: 'button', 'aria-label': `Robot ${robot.id}: details` },
+        swatch, el('strong', { text: `${robot.id} · ${robot.name}` }), state, line2);
+      node.addEventListener('click', () => onOpen(robot));
+      node.addEventListener('keydown', (event) => { if (event.key === 'Enter') onOpen(robot); });
+      return { robot, node, state, line2 };
+    });
+    this.node = el('div', { class: 'robot-list' }, ...this.rows.map((row) => row.node));
+  }
+
+  names() {
+    return this.fleet.robots.flatMap((robot) => Object.values(robot.tags));
+  }
+
+  update() {
+    const value = (name) => { const item = name ? this.live.get(name) : undefined; return item ? item.v : undefined; };
+    for (const row of this.rows) {
+      const tags = row.robot.tags;
+      const quality = this.live.get(tags.xpos);
+      const online = tags.online ? value(tags.online) !== false : true;
+      const offline = (quality && quality.q === 2) || (row.robot.driver === 'remote' && !online);
+      const navstate = offline ? 'offline' : (value(tags.navstate) || 'idle');
+      row.state.className = `chip ${NAVSTATE_CLASS[navstate] || 'idle'}`;
+      setText(row.state, navstate);
+      const parts = [];
+      const current = value(tags.tcurr);
+      const where = value(tags.currloc) || 0;
+      if (current && (where > 0 || value(tags.status))) parts.push(`task ${current}: ${CURRLOC_TEXT[where] || ''}`);
+      else parts.push('no task');
+      if (typeof value(tags.load) === 'number') parts.push(`load ${value(tags.load)}/${value(tags.loadcap) ?? row.robot.load_capacity}`);
+      if (typeof value(tags.speed) === 'number') parts.push(formatWithUnit(value(tags.speed), 'm/s', 2));
+      if (row.robot.driver === 'remote') parts.push(online ? 'remote, online' : 'remote, OFFLINE');
+      const reason = value(tags.navreason);
+      if (reason && (navstate === 'blocked' || navstate === 'failed')) parts.push(reason);
+      setText(row.line2, parts.join(' · '));
+    }
+  }
+}
