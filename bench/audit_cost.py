@@ -68,7 +68,7 @@ tasks:
     priority: 0
     programs:
       - {{name: probe, program: "{CORE}:Counter", bind: {{count: probe_count}}}}
-servers: {{opcua: {{enabled: false}}, {servers}}}
+servers: {{opcua: {{enabled: false}}, hmi: {{enabled: false}}, {servers}}}
 audit:
   {storage}
   flush_period: 1s

@@ -1,4 +1,4 @@
-"""Helpers for the audit tests: a plant with every door open (OPC UA, Modbus, alarms, programs), as `softplc run` builds it."""
+"""Helpers for the audit tests: a plant with every door open (OPC UA, Modbus, the HMI, alarms, programs), as `softplc run` builds it."""
 
 from __future__ import annotations
 
@@ -42,6 +42,7 @@ tasks:
 servers:
   opcua: {endpoint: "opc.tcp://127.0.0.1:0/softplc/"}
   modbus: {port: 0}
+  hmi: {port: 0}
 alarms:
   definitions:
     - {name: level_hi, limit: {tag: level, hi: 90}, priority: high}

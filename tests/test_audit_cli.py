@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import csv
 import io
@@ -99,7 +100,7 @@ async def test_a_simulated_run_keeps_its_own_trail_on_the_simulated_clock(tmp_pa
     config = load_config(tmp_path / "tagdb.yaml")
     for run in range(2):  # the second run replaces the first one's trail
         runtime = Runtime(config, SimClock(), state_dir=tmp_path / "state", retain=False)
-        for item in build_adapters(config, None):
+        for item in build_adapters(config, argparse.Namespace(sim=True, no_servers=True)):
             runtime.add_adapter(item)
         await runtime.start()
         try:

@@ -32,6 +32,7 @@ tasks:
 servers:
   opcua: {enabled: false}
   modbus: {enabled: false}
+  hmi: {enabled: false}
 """
 
 

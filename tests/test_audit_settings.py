@@ -23,6 +23,7 @@ tags:
 servers:
   opcua: {enabled: false}
   modbus: {enabled: false}
+  hmi: {enabled: false}
 """
 
 

@@ -1,9 +1,10 @@
 """An audit entry for a write from every source and for every kind of action, with who, from where, old, new and the rule.
 
-One plant as `softplc run` builds it (audit trail, alarms, OPC UA, Modbus; a 10 ms task), real
-clients over loopback: asyncua, pymodbus, the live CLI (`softplc write`, `softplc force` in
-their own processes), and the OPC UA door to the commands (program control, online change,
-alarm acknowledgement, reset faults). The entries are read back from the store.
+One plant as `softplc run` builds it (audit trail, alarms, OPC UA, Modbus, the HMI; a 10 ms task),
+real clients over loopback: asyncua, pymodbus, aiohttp on the HMI's JSON API, the live CLI
+(`softplc write`, `softplc force` in their own processes), and the OPC UA door to the commands
+(program control, online change, alarm acknowledgement, reset faults). The entries are read back
+from the store.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import aiohttp
 from asyncua import ua
 from pymodbus.client import AsyncModbusTcpClient
 
@@ -51,6 +53,17 @@ async def test_every_source_and_action_is_audited_with_who_old_new_and_rule(tmp_
                 modbus_peer = local_address(modbus.ctx.transport)
             finally:
                 modbus.close()
+            # the HMI's JSON API: logged in, and not
+            hmi = adapter(runtime, "hmi").url
+            async with aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True)) as browser:
+                async with browser.post(hmi + "api/login", json={"user": "operator", "password": PASSWORDS["operator"]}) as response:
+                    csrf = (await response.json())["csrf"]
+                async with browser.post(hmi + "api/write", json={"tag": "setpoint", "value": 9}, headers={"X-CSRF-Token": csrf}) as response:
+                    assert response.status == 200, await response.text()
+            await wait_until(lambda: db.value("setpoint") == 9)
+            async with aiohttp.ClientSession() as stranger:
+                async with stranger.post(hmi + "api/write", json={"tag": "setpoint", "value": 66}) as response:
+                    assert response.status == 403
             # the live CLI (an OPC UA client in its own process)
             code, _, err = await softplc("write", "setpoint=12", "--user", "operator", "--endpoint", endpoint, home=tmp_path, password=PASSWORDS["operator"])
             assert code == 0, err
@@ -86,7 +99,10 @@ async def test_every_source_and_action_is_audited_with_who_old_new_and_rule(tmp_
         ("write", "opcua", "operator", "operator", "level", "level", 42.5, 1.0, False, "invalid request"),
         ("write", "modbus", "", "operator", "setpoint", "setpoint", 0, 7, True, ""),
         ("write", "modbus", "", "operator", "setpoint", "setpoint", 7, 200, False, "out of range"),
-        ("write", "opcua", "operator", "operator", "setpoint", "setpoint", 7, 12, True, ""),
+        ("write", "hmi", "operator", "operator", "setpoint", "setpoint", 7, 9, True, ""),
+        # not logged in: no user, a viewer
+        ("write", "hmi", "", "viewer", "setpoint", "setpoint", 9, 66, False, "access denied"),
+        ("write", "opcua", "operator", "operator", "setpoint", "setpoint", 9, 12, True, ""),
         ("write", "opcua", "operator", "operator", "level", "level", 42.5, 95.0, True, ""),
         ("command", "opcua", "operator", "operator", "alarms.acknowledge", "", None, None, True, ""),
         ("command", "opcua", "engineer", "engineer", "tags.force", "level", 95.0, 55.0, True, ""),
@@ -100,19 +116,21 @@ async def test_every_source_and_action_is_audited_with_who_old_new_and_rule(tmp_
         ("command", "opcua", "anonymous", "viewer", "runtime.reset_faults", "", None, None, False, "access denied"),
     ]
     assert isinstance(found[1].old, int)
-    # Who and from where: each client's own address; the CLI's processes from theirs.
-    assert [entry.peer for entry in found[:5]] == [peers["operator"]] * 3 + [peers["anonymous"], peers["operator"]]
+    # Who and from where: OPC UA and HMI writes carry the client's address, Modbus writes and the
+    # commands door its address and port (each client's own).
+    assert {entry.peer for entry in found[:5] + found[7:11]} == {"127.0.0.1"}
     assert [entry.peer for entry in found[5:7]] == [modbus_peer] * 2
-    cli_peers = [found[7].peer, found[10].peer, found[11].peer]
+    assert found[11].peer == peers["operator"] and found[14].peer == peers["engineer"] and found[20].peer == peers["anonymous"]
+    cli_peers = [found[12].peer, found[13].peer]  # the CLI's processes: their own connections
     assert all(peer.startswith("127.0.0.1:") and peer not in peers.values() for peer in cli_peers), cli_peers
-    assert found[9].peer == peers["operator"] and found[12].peer == peers["engineer"] and found[18].peer == peers["anonymous"]
     # What each refusal says, in the runtime's words; what each command was given and did.
     assert found[1].detail == "the tag is read-only for clients" and found[2].detail == "500 is above the maximum 100"
     assert found[3].detail == "role viewer may not write" and found[4].detail == "clients cannot write a tag's quality"
-    assert found[9].arguments == {"alarm": "level_hi"} and found[9].detail == "acknowledged level_hi (now acknowledged)"
-    assert found[10].arguments == {"tag": "level", "value": "55"} and found[10].detail == "level forced to 55.0 from the next cycle"
-    assert found[11].detail == "role operator may not force tags"
-    assert found[14].detail.startswith("no program 'nope'"), found[14].detail
-    assert found[15].arguments == {"check": True} and found[15].detail.startswith("nothing to apply")
+    assert found[8].detail == "log in to write"
+    assert found[11].arguments == {"alarm": "level_hi"} and found[11].detail == "acknowledged level_hi (now acknowledged)"
+    assert found[12].arguments == {"tag": "level", "value": "55"} and found[12].detail == "level forced to 55.0 from the next cycle"
+    assert found[13].detail == "role operator may not force tags"
+    assert found[16].detail.startswith("no program 'nope'"), found[16].detail
+    assert found[17].arguments == {"check": True} and found[17].detail.startswith("nothing to apply")
     # In time order, on the runtime's clock.
     assert [entry.time for entry in found] == sorted(entry.time for entry in found)
