@@ -90,6 +90,7 @@ async def measure(args: argparse.Namespace, state: Path, audit: bool) -> dict[st
         runtime.add_adapter(adapter)
     recorder = next((adapter for adapter in runtime.adapters if adapter.name == "audit"), None)
     accepted = [0]  # writes accepted (counted from submit's results: a listener would cost the baseline too)
+    began = runtime.clock.wall()  # this run's entries: a shared PostgreSQL store may hold earlier runs'
     await runtime.start()
     names = [f"w{index:04d}" for index in range(TAGS)]
     submit_cpu = [0.0, 0]  # thread CPU seconds spent in db.submit, items submitted
@@ -123,7 +124,9 @@ async def measure(args: argparse.Namespace, state: Path, audit: bool) -> dict[st
         await asyncio.sleep(args.warmup)
         probe = next(task for task in runtime.tasks if task.name == "probe")
         probe.stats.reset()
-        writer_thread = recorder.writer._thread if recorder is not None and recorder.writer is not None else None
+        writer = recorder.writer if recorder is not None else None
+        writer_thread = writer._thread if writer is not None else None
+        rows_before = writer.stats.rows_written if writer is not None else 0
         gate = recorder.gate if recorder is not None else None
         pauses_before = gate.pauses if gate is not None else 0
         accepted_before, submitted_before = accepted[0], submit_cpu[1]
@@ -134,12 +137,13 @@ async def measure(args: argparse.Namespace, state: Path, audit: bool) -> dict[st
         cpu = time.process_time() - cpu_before
         writes = accepted[0] - accepted_before
         writer_cpu = thread_cpu(writer_thread) - writer_before
+        rows = (writer.stats.rows_written - rows_before) if writer is not None else 0
         submitted = submit_cpu[1] - submitted_before
         submit_per_item = (submit_cpu[0] - submit_before) / submitted if submitted else 0.0
         latency = probe.stats.latency.summary()
         figures = {"writes_per_s": writes / elapsed if client is None else 0.0, "p99": latency["p99"], "max": latency["max"], "mean": latency["mean"],
                    "overruns": probe.stats.overruns, "cycles": probe.stats.cycles, "cpu": cpu / elapsed,
-                   "writer_us": writer_cpu / writes * 1e6 if writes and writer_thread else 0.0, "submit_us": submit_per_item * 1e6,
+                   "writer_us": writer_cpu / rows * 1e6 if rows else 0.0, "submit_us": submit_per_item * 1e6,
                    "pauses": (gate.pauses - pauses_before) if gate is not None else 0}
         stopping.set()
         if client is not None:
@@ -158,19 +162,20 @@ async def measure(args: argparse.Namespace, state: Path, audit: bool) -> dict[st
         await runtime.stop()
     figures["accepted"] = accepted[0]
     if recorder is not None:
-        figures["recorded"] = count_entries(recorder)
+        figures["recorded"] = count_entries(recorder, began)
     return figures
 
 
-def count_entries(recorder: Any) -> int:
-    """Entries of the plant in the (stopped) recorder's store."""
+def count_entries(recorder: Any, since: float) -> int:
+    """Write entries from `since` on in the (stopped) recorder's store."""
     from softplc.audit.store import CATALOGUE
 
     database = recorder.database
     connection = database.connect(readonly=True)
     try:
         tables = [name for (name,) in connection.execute(f"SELECT name FROM {CATALOGUE}").fetchall()]
-        return sum(connection.execute(f"SELECT COUNT(*) FROM {table} WHERE kind = 'write'").fetchone()[0] for table in tables)
+        statement = recorder.database.sql("SELECT COUNT(*) FROM {} WHERE kind = 'write' AND time >= ?")
+        return sum(connection.execute(statement.format(table), (since,)).fetchone()[0] for table in tables)
     finally:
         connection.close()
 
@@ -216,8 +221,12 @@ def report(args: argparse.Namespace, audit: bool, result: dict[str, float]) -> N
     if args.source == "loop":
         print(f"  db.submit on the event loop: {result['submit_us']:.2f} µs of CPU per write")
     if audit:
-        every = "every write recorded" if result["recorded"] == result["accepted"] else "WRITES MISSING FROM THE TRAIL"
-        print(f"  {result['accepted']:,.0f} writes accepted in the whole run, {result['recorded']:,.0f} in the audit trail: {every}; "
+        # A Modbus client stopped mid-request may not have counted the last request the runtime applied.
+        in_flight = 0 if args.source == "loop" else args.per_batch
+        every = ("every write recorded" if result["accepted"] <= result["recorded"] <= result["accepted"] + in_flight
+                 else "WRITES MISSING FROM THE TRAIL")
+        accepted = "accepted" if args.source == "loop" else "acknowledged to the client"
+        print(f"  {result['accepted']:,.0f} writes {accepted} in the whole run, {result['recorded']:,.0f} in the audit trail: {every}; "
               f"writer thread {result['writer_us']:.2f} µs of CPU per entry; it stepped aside for a cycle {result['pauses']:.0f} times")
         verdict = "met" if result["p99"] <= GOAL_P99_MS else "GOAL MISSED"
         print(f"  goal p99 <= {GOAL_P99_MS} ms with the audit: {verdict}")
