@@ -14,16 +14,22 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from datetime import datetime, timezone
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
+from softplc.audit.entry import AuditEntry
 from softplc.audit.queries import KINDS, MAX_ROWS, AuditQuery
 from softplc.clock import Clock
 from softplc.commands import CommandRefused, Commands, Permission
 from softplc.storage.database import driver_errors
 from softplc.tagdb import Origin
 
-if TYPE_CHECKING:
-    from softplc.audit.recorder import AuditRecorder
+
+class _Trail(Protocol):
+    """What the command uses of `softplc.audit.recorder.AuditRecorder` (which imports this module)."""
+
+    def flush(self, timeout: float = 30.0) -> bool: ...
+
+    def search(self, query: AuditQuery) -> list[AuditEntry]: ...
 
 ARGUMENTS = {
     "since": "from (epoch s or ISO 8601, UTC unless a zone is given)", "until": "to, excluded (epoch s or ISO 8601)",
@@ -34,7 +40,7 @@ ARGUMENTS = {
 }
 
 
-def register_audit_commands(commands: Commands, recorder: AuditRecorder, clock: Clock) -> list[Callable[[], None]]:
+def register_audit_commands(commands: Commands, recorder: _Trail, clock: Clock) -> list[Callable[[], None]]:
     """Register `audit.query`; returns its unregister."""
 
     async def query(arguments: Mapping[str, Any], origin: Origin) -> list[dict[str, Any]]:
