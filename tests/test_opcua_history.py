@@ -156,7 +156,7 @@ async def test_processed_reads_follow_part_13(plant, client) -> None:
     assert seen(nothing) == [(100, None, S.BadNoData), (110, None, S.BadNoData)]
 
 
-async def test_processed_reads_refuse_what_they_cannot_do_with_the_spec_statuses(plant, client) -> None:
+async def test_reads_refused_and_nodes_without_history_get_the_spec_statuses(plant, client) -> None:
     _, server = plant
     (total,) = await read(client, server, processed(0, 20, 10, F.AggregateFunction_Total), "level")
     assert total.StatusCode.value == S.BadAggregateNotSupported
@@ -171,6 +171,17 @@ async def test_processed_reads_refuse_what_they_cannot_do_with_the_spec_statuses
     rejected = ua.AggregateConfiguration(UseServerCapabilitiesDefaults=False, PercentDataBad=10, PercentDataGood=10)
     (refused,) = await read(client, server, processed(0, 20, 10, F.AggregateFunction_Average, config=rejected), "level")
     assert refused.StatusCode.value == S.BadAggregateConfigurationRejected
+    # Beside a historized tag: a tag without history, an unknown node, a standard node; reads not offered.
+    nodes = ["level", "spare", ua.NodeId("no_such_tag", server.namespace_index), ua.NodeId(ua.ObjectIds.Server)]
+    unsupported = [S.BadHistoryOperationUnsupported, S.BadNodeIdUnknown, S.BadHistoryOperationUnsupported]
+    for details in (raw(at(0), at(10)), processed(0, 10, 5, *[F.AggregateFunction_Average] * 4),
+                    ua.ReadAtTimeDetails(ReqTimes=[at(1)], UseSimpleBounds=False)):
+        first, *others = await read(client, server, details, *nodes)
+        assert first.StatusCode.is_good() and first.HistoryData.DataValues and [r.StatusCode.value for r in others] == unsupported
+    for details in (ua.ReadRawModifiedDetails(IsReadModified=True, StartTime=at(0), EndTime=at(10)),
+                    ua.ReadEventDetails(StartTime=at(0), EndTime=at(10))):
+        (result,) = await read(client, server, details, "level")
+        assert result.StatusCode.value == S.BadHistoryOperationUnsupported
 
 
 async def test_values_at_times_are_interpolated_or_use_simple_bounds(plant, client) -> None:
@@ -186,16 +197,3 @@ async def test_values_at_times_are_interpolated_or_use_simple_bounds(plant, clie
     (simple,) = await read(client, server, ua.ReadAtTimeDetails(ReqTimes=times, UseSimpleBounds=True), "pressure")
     # Simple bounds: the value before; a bad one (or a bad one at the time) gives Bad_NoData.
     assert seen(simple) == [(15, 10.0, SUB | INTERP), (20, None, S.BadNoData), (25, None, S.BadNoData), (45, None, S.BadNoData)]
-
-
-async def test_nodes_without_history_and_reads_not_offered(plant, client) -> None:
-    _, server = plant
-    nodes = ["spare", ua.NodeId("no_such_tag", server.namespace_index), ua.NodeId(ua.ObjectIds.Server)]
-    for details in (raw(at(0), at(10)), processed(0, 10, 5, F.AggregateFunction_Average), ua.ReadAtTimeDetails(ReqTimes=[at(1)])):
-        results = await read(client, server, details, *nodes) if not isinstance(details, ua.ReadProcessedDetails) else \
-            await read(client, server, processed(0, 10, 5, *[F.AggregateFunction_Average] * 3), *nodes)
-        assert [r.StatusCode.value for r in results] == [S.BadHistoryOperationUnsupported, S.BadNodeIdUnknown, S.BadHistoryOperationUnsupported]
-    for details in (ua.ReadRawModifiedDetails(IsReadModified=True, StartTime=at(0), EndTime=at(10)),
-                    ua.ReadEventDetails(StartTime=at(0), EndTime=at(10))):
-        (result,) = await read(client, server, details, "level")
-        assert result.StatusCode.value == S.BadHistoryOperationUnsupported
