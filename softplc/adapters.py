@@ -68,7 +68,8 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
     """
     from softplc.yamlsource import ConfigError, Problem
 
-    # Alarms first: the OPC UA server lists them (as conditions) when it starts.
+    # Alarms first: the OPC UA server lists them (as conditions) when it starts; the historian
+    # before it too: the server asks `history.tags` which tags are historized as it builds its nodes.
     builders = [_alarms, _fleet, _history]  # alarms, robots and the historian are not servers: --no-servers keeps them
     if not (args is not None and getattr(args, "no_servers", False)):
         builders += [_opcua, _modbus]
