@@ -184,3 +184,17 @@ def test_continuations_are_checked_and_processed_reads_go_on_page_by_page(store:
     assert [len(page) for page in pages] == [2, 2, 1] and [r for page in pages for r in page] == whole
     assert [r.value for r in whole] == [0.5, 2.5, 4.5, 6.5, 8.5]
     assert math.isclose(whole[0].time, T0)
+
+
+def test_a_read_without_a_limit_comes_in_pages_of_max_values(store: Store) -> None:
+    from softplc.history.reads import MAX_VALUES
+
+    store.write([("level", T0 + t * 0.1, float(t), GOOD) for t in range(2 * MAX_VALUES + 5)])
+    sizes, token, seen_values = [], None, []
+    while True:
+        results, token = read_raw(store.reader, "level", T0, None, token=token)
+        sizes.append(len(results))
+        seen_values += [r.value for r in results]
+        if token is None:
+            break
+    assert sizes == [MAX_VALUES, MAX_VALUES, 5] and seen_values == [float(t) for t in range(2 * MAX_VALUES + 5)]

@@ -76,7 +76,7 @@ async def test_a_viewer_reads_history_as_plain_data(plant) -> None:
     ("history.read_processed", {"tag": "note", "start": EPOCH, "end": EPOCH + 1, "aggregate": "average"},
      "aggregate average needs a numeric tag; note is a string"),
     ("history.read_at_time", {"tag": "level", "times": "now"}, "times: a list of Unix seconds"),
-    ("history.plot", {"tag": "level", "start": EPOCH, "end": EPOCH + 1, "max_points": 1}, "max_points: 2 to 20000, not 1"),
+    ("history.plot", {"tag": "level", "start": EPOCH, "end": EPOCH + 1, "max_points": 1}, "max_points: 2 to 10000, not 1"),
 ])
 async def test_bad_arguments_are_refused_with_the_reason(plant, command, arguments, refusal) -> None:
     runtime, _ = plant

@@ -86,7 +86,7 @@ async def test_historized_tags_say_so_and_the_server_advertises_its_history_capa
     assert await capability(F.HistoryServerCapabilities_AccessHistoryDataCapability) is True
     assert await capability(F.HistoryServerCapabilities_AccessHistoryEventsCapability) is False
     assert await capability(F.HistoryServerCapabilities_InsertDataCapability) is False
-    assert await capability(F.HistoryServerCapabilities_MaxReturnDataValues) == 10_000
+    assert await capability(F.HistoryServerCapabilities_MaxReturnDataValues) == 1000
     assert await capability(F.Server_ServerCapabilities_OperationLimits_MaxNodesPerHistoryReadData) == 1000
 
 

@@ -39,4 +39,4 @@ async def test_node_opcua_reads_raw_processed_and_at_time_history(tmp_path) -> N
     assert seen["pressureSimple"] == [[_ms(25), None, S.BadNoData]]
     assert seen["aggregateFunctions"] == sorted(["Average", "Count", "Interpolative", "Maximum", "MaximumActualTime", "Minimum",
                                                  "MinimumActualTime", "TimeAverage2"])
-    assert seen["maxReturnDataValues"] == 10_000
+    assert seen["maxReturnDataValues"] == 1000

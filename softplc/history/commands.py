@@ -2,7 +2,7 @@
 
 Registered by the running historian (`HistoryRecorder.start`) on `runtime.commands`, all VIEW
 (any role), not audited; each does its store work off the event loop (`clock.run_blocking`) and
-returns plain data (dicts, lists, numbers, strings, None) — what `softplc.opcua.commands` sends
+returns plain data (dicts, lists, numbers, strings, None; built in the worker thread too) — what `softplc.opcua.commands` sends
 as JSON to remote callers too. Times are Unix seconds on the runtime clock (simulated under
 --sim), like tag timestamps. A value is {"time", "value", "quality", "flags"}: quality "good" /
 "uncertain" / "bad"; flags from Part 13 ("calculated", "interpolated", "partial", "multi_value",
@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-MAX_PLOT_POINTS = 20_000
+MAX_PLOT_POINTS = 10_000
 
 _RANGE = {"tag": "tag name", "start": "Unix seconds (runtime clock); omitted: open", "end": "Unix seconds; omitted: open"}
 
@@ -64,8 +64,7 @@ def register_history_commands(runtime: Runtime, reader: HistoryReader, recorded:
         token = _optional_text(arguments, "continuation")
         start, end = _time(arguments, "start"), _time(arguments, "end")
         limit, bounds = _count(arguments, "limit"), _flag(arguments, "bounds")
-        results, more = await blocking(lambda: read_raw(reader, tag, start, end, limit=limit, bounds=bounds, token=token))
-        return {"samples": [as_dict(r) for r in results], "continuation": more}
+        return await blocking(lambda: _page(read_raw(reader, tag, start, end, limit=limit, bounds=bounds, token=token)))
 
     async def processed(arguments: Mapping[str, Any], origin: Any) -> dict[str, Any]:
         tag = _tag(arguments)
@@ -75,9 +74,8 @@ def register_history_commands(runtime: Runtime, reader: HistoryReader, recorded:
         aggregate = _aggregate(arguments, token)
         config = _config(arguments.get("config"))
         limit = _count(arguments, "limit")
-        results, more = await blocking(lambda: read_processed(reader, tag, start, end, interval, aggregate, config=config,
-                                                              limit=limit, token=token))
-        return {"samples": [as_dict(r) for r in results], "continuation": more}
+        return await blocking(lambda: _page(read_processed(reader, tag, start, end, interval, aggregate, config=config,
+                                                           limit=limit, token=token)))
 
     async def at_time(arguments: Mapping[str, Any], origin: Any) -> dict[str, Any]:
         tag = _tag(arguments)
@@ -85,8 +83,8 @@ def register_history_commands(runtime: Runtime, reader: HistoryReader, recorded:
         if not isinstance(times, (list, tuple)) or not all(_is_time(t) for t in times):
             raise CommandRefused("times: a list of Unix seconds")
         simple, config = _flag(arguments, "simple_bounds"), _config(arguments.get("config"))
-        results = await blocking(lambda: read_at_time(reader, tag, [float(t) for t in times], simple_bounds=simple, config=config))
-        return {"samples": [as_dict(r) for r in results]}
+        moments = [float(t) for t in times]
+        return await blocking(lambda: {"samples": [as_dict(r) for r in read_at_time(reader, tag, moments, simple_bounds=simple, config=config)]})
 
     async def plot(arguments: Mapping[str, Any], origin: Any) -> dict[str, Any]:
         tag = _tag(arguments)
@@ -94,8 +92,11 @@ def register_history_commands(runtime: Runtime, reader: HistoryReader, recorded:
         points = _count(arguments, "max_points") or DEFAULT_PLOT_POINTS
         if not 2 <= points <= MAX_PLOT_POINTS:
             raise CommandRefused(f"max_points: 2 to {MAX_PLOT_POINTS}, not {points}")
-        result = await blocking(lambda: reader.plot(tag, start, end, points))
-        return {"samples": [as_dict(s) for s in result.samples], "decimated": result.decimated, "bucket": result.bucket}
+        def plotted() -> dict[str, Any]:
+            result = reader.plot(tag, start, end, points)
+            return {"samples": [as_dict(s) for s in result.samples], "decimated": result.decimated, "bucket": result.bucket}
+
+        return await blocking(plotted)
 
     raw_arguments = {**_RANGE, "limit": f"at most this many values (0: {MAX_VALUES}); more: a continuation",
                      "bounds": "true: add the bounding values", "continuation": "the previous page's continuation"}
@@ -124,6 +125,12 @@ def register_history_commands(runtime: Runtime, reader: HistoryReader, recorded:
             undo()
 
     return unregister_all
+
+
+def _page(page: tuple[list[Any], str | None]) -> dict[str, Any]:
+    """A page of results as plain data (built in the worker thread, not on the event loop)."""
+    results, more = page
+    return {"samples": [as_dict(r) for r in results], "continuation": more}
 
 
 # -- argument checks: a clear refusal for each mistake -------------------------------------------

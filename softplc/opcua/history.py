@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import logging
 import struct
-from collections.abc import Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import Any, Protocol
@@ -67,7 +67,9 @@ from softplc.tags import Quality
 log = logging.getLogger(__name__)
 
 MAX_NODES_PER_HISTORY_READ = 1000
-MAX_RETURN_DATA_VALUES = 10_000  # values per node per call; more come with a continuation point
+# Values per node per call; more come with a continuation point. Building and encoding a reply runs
+# on the scan's event loop (~10 ms for 1,000 values here, ten times that for 10,000): clients page.
+MAX_RETURN_DATA_VALUES = 1_000
 _CONTINUATION_MAGIC = b"SPH1"
 _EPOCH_MIN = datetime(1601, 1, 2, tzinfo=timezone.utc)  # before this a DateTime means "not given"
 _DOUBLE_AGGREGATES = frozenset({"Average", "TimeAverage", "TimeAverage2", "Total", "Total2"})
@@ -117,11 +119,14 @@ class NoHistory:
 class TagHistoryService(HistoryManager):
     """asyncua's history manager with HistoryRead answered per item from a HistoryProvider."""
 
-    def __init__(self, iserver: Any, db: TagDatabase, namespace_index: int, provider: HistoryProvider) -> None:
+    def __init__(self, iserver: Any, db: TagDatabase, namespace_index: int, provider: HistoryProvider,
+                 run_blocking: Callable[..., Awaitable[Any]] | None = None) -> None:
+        """`run_blocking(function)`: where to build the DataValues of a reply (the runtime clock's: off the loop)."""
         super().__init__(iserver)
         self.db = db
         self.ns = namespace_index
         self.provider = provider
+        self._run_blocking = run_blocking
 
     async def read_history(self, params: ua.HistoryReadParameters) -> list[ua.HistoryReadResult]:
         items = params.NodesToRead or []
@@ -174,7 +179,13 @@ class TagHistoryService(HistoryManager):
         if isinstance(outcome, int):
             return _status(outcome)
         samples, variant_type, more = outcome
-        values = [_data_value(sample, variant_type, params.TimestampsToReturn) for sample in samples]
+        timestamps = params.TimestampsToReturn
+
+        def build() -> list[ua.DataValue]:
+            return [_data_value(sample, variant_type, timestamps) for sample in samples]
+
+        # ~2.5 ms per 1,000 values: a worker thread's, not the scan's.
+        values = await self._run_blocking(build) if self._run_blocking is not None and len(samples) > 50 else build()
         result = ua.HistoryReadResult(HistoryData=ua.HistoryData(DataValues=values))
         if more is not None:
             result.ContinuationPoint = _wrap(tag, more)

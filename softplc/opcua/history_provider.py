@@ -98,9 +98,16 @@ class CommandHistory:
             raise HistoryUnavailable(str(refused)) from None
 
 
+_QUALITIES = {quality.value: quality for quality in Quality}
+_statuses: dict[tuple[str, tuple[str, ...]], int] = {}
+
+
 def _sample(entry: Mapping[str, Any]) -> Sample:
-    quality = Quality(entry["quality"])
-    return Sample(entry["time"], entry["value"], quality, status_code(entry["quality"], entry.get("flags", ())))
+    key = (entry["quality"], tuple(entry.get("flags", ())))
+    status = _statuses.get(key)
+    if status is None:
+        status = _statuses[key] = status_code(*key)
+    return Sample(entry["time"], entry["value"], _QUALITIES[key[0]], status)
 
 
 def status_code(quality: str, flags: Sequence[str]) -> int:

@@ -245,7 +245,7 @@ class OpcUaServer:
         self.node_count = builder.node_count
         self.writes = TagAttributeService(iserver.aspace, db, ns)
         iserver.attribute_service = self.writes
-        iserver.history_manager = TagHistoryService(iserver, db, ns, self.history)
+        iserver.history_manager = TagHistoryService(iserver, db, ns, self.history, runtime.clock.run_blocking)
         # UserAccessLevel per session role: asyncua's attribute service reads without the session.
         self.server.subscribe_server_callback(CallbackType.PostRead, self.writes.user_access_level)
 
