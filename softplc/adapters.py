@@ -83,7 +83,8 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
     from softplc.yamlsource import ConfigError, Problem
 
     # The audit trail first: it listens before any client can write, and stops last. Alarms
-    # next: the OPC UA server lists them (as conditions) when it starts.
+    # next: the OPC UA server lists them (as conditions) when it starts; the historian before it
+    # too: the server asks `history.tags` which tags are historized as it builds its nodes.
     builders = [_audit, _alarms, _fleet, _history]  # none of them is a server: --no-servers keeps them
     if not (args is not None and getattr(args, "no_servers", False)):
         builders += [_opcua, _modbus, _hmi]

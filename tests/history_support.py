@@ -35,3 +35,15 @@ class Flood(Program):
         self.tick = self.count
         base = self.count * 0.001
         self.values = [base + index for index in range(len(self.values))]
+
+
+class Ramp(Program):
+    """`level` = the time in seconds up to 40 s, then 40 for ever; `steps` = whole thirds of it."""
+
+    level = Output("min(t, 40)")
+    steps = Output("int(min(t, 40)) // 3")
+
+    def scan(self) -> None:
+        held = min(self.now, 40.0)
+        self.level = held
+        self.steps = int(held) // 3

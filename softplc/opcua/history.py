@@ -2,49 +2,56 @@
 
 asyncua 2.1.0 (pinned) answers every HistoryRead with Good and no data — even for node ids that
 do not exist — and logs a warning per call. `TagHistoryService` (installed as the server's
-`history_manager`) answers per item instead, without logging:
+`history_manager`) answers per item instead, without logging (docs/opcua.md#history has the
+table of statuses):
 
-    Good                              raw values of a historized tag (ReadRawModifiedDetails,
-                                      IsReadModified false), with continuation points
-    BadNodeIdUnknown                  no such node
-    BadHistoryOperationUnsupported    a node without history (every tag until a historian is
-                                      plugged in; folders, properties, the standard nodes), or a
-                                      kind of read not offered: modified, processed (aggregates),
-                                      at-time, events, annotations
-    BadIndexRangeInvalid              an IndexRange (tags are scalars)
-    BadContinuationPointInvalid       a continuation point this server did not give for that node
+    raw (ReadRawModifiedDetails, IsReadModified false), with bounds and continuation points;
+    processed (ReadProcessedDetails: the provider's Part 13 aggregates, AggregateConfiguration);
+    at time (ReadAtTimeDetails, UseSimpleBounds);
+    BadNodeIdUnknown, BadHistoryOperationUnsupported (a node without history, modified values,
+    events, annotations), BadAggregateNotSupported, BadAggregateListMismatch,
+    BadAggregateConfigurationRejected, BadInvalidArgument, BadIndexRangeInvalid,
+    BadContinuationPointInvalid, BadResourceUnavailable (the historian cannot read now);
+    for the request: BadNothingToDo, BadTooManyOperations, BadTimestampsToReturnInvalid,
+    BadHistoryOperationInvalid.
 
-and for the whole request: BadNothingToDo (no node), BadTooManyOperations (more than
-`MAX_NODES_PER_HISTORY_READ`, advertised as MaxNodesPerHistoryReadData), BadTimestampsToReturnInvalid
-(Neither), BadHistoryOperationInvalid (no or unknown details).
+## The provider interface (for a historian)
 
-## The provider interface (for the historian)
-
-A historian gives the server a `HistoryProvider`: `OpcUaServer(settings, history=provider)`.
+`OpcUaServer(settings, history=provider)`; without one, the server reads through the running
+historian's commands (`history_provider.CommandHistory`). Times are epoch seconds on the
+runtime clock (tag timestamps); None: not given (open).
 
     historized(tag) -> bool
-        Whether the tag has history. Its Variable then gets AccessLevel bit HistoryRead and
-        Historizing = True (asked once, when the address space is built).
-    async read_raw(tag, start, end, limit, resume) -> HistoryPage
-        The tag's samples from `start` towards `end` (epoch seconds on the runtime clock, like
-        tag timestamps; None: open on that side). Oldest first when start <= end (or end is
-        None), newest first when start > end (or only end is given), as Part 11 orders them.
-        At most `limit` samples (0: no limit). When more remain, `HistoryPage.resume` is an
-        opaque bytes token of the provider's own making; the server wraps it (with the tag
-        name) into the client's continuation point and passes it back as `resume` on the next
-        call (with the same start, end and limit). A token the provider does not recognise:
-        raise ValueError (the client gets BadContinuationPointInvalid). Continuation points are
-        stateless: a released one needs no clean-up.
+        Asked once per tag when the address space is built: AccessLevel HistoryRead and
+        Historizing = True.
+    async read_raw(tag, start, end, limit, resume[, bounds=True]) -> HistoryPage
+        At most `limit` raw samples from `start` towards `end` (Part 11 §6.5.3: backwards when
+        start > end or only end is given), with the bounding values first and last when
+        `bounds` is passed. `HistoryPage.resume`: an opaque bytes token when more remain; the
+        server wraps it (with the tag name) into the client's continuation point and passes it
+        back as `resume` (the token must hold the whole request: Part 11 ignores the details
+        then). Unrecognised token: raise ValueError. Stateless: a released point needs no
+        clean-up. The service passes bounds only when asked for.
+    aggregates: Collection[str]                                  (optional, with the next three)
+        Part 13 names of the aggregates offered ("Average", "Interpolative", ...).
+    supports(tag, aggregate) -> bool
+        Whether that aggregate applies to that tag (no Average of a string).
+    async read_processed(tag, start, end, interval, aggregate, config, limit, resume) -> HistoryPage
+        One sample per interval (seconds; 0: one interval); `config` None (the defaults) or
+        (treat_uncertain_as_bad, percent_data_bad, percent_data_good).
+    async read_at_time(tag, times, simple_bounds) -> list[Sample]
 
-Each `Sample` is (time, value, quality); values have the tag's Python type, as in the tag
-database. The provider is awaited on the event loop that runs the scan: do file or database work
-in a thread (or the runtime clock's `run_blocking`). `NoHistory` (nothing historized) is the default.
+A `Sample` is (time, value, quality[, status]): `status`, when given, is the exact OPC UA
+StatusCode (Bad_NoData, Uncertain_DataSubNormal, the Part 13 info bits...). A provider that
+cannot read now (its store is unreachable) raises `HistoryUnavailable`. It is awaited on the
+scan's event loop: file or database work belongs in a thread (or the clock's `run_blocking`).
 """
 
 from __future__ import annotations
 
+import logging
 import struct
-from collections.abc import Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import Any, Protocol
@@ -53,22 +60,30 @@ from asyncua import ua
 from asyncua.common.utils import ServiceError
 from asyncua.server.history import HistoryManager
 
-from softplc.opcua.variants import VARIANT_TYPES, STATUS_CODES
+from softplc.opcua.variants import STATUS_CODES, VARIANT_TYPES
 from softplc.tagdb import TagDatabase
 from softplc.tags import Quality
 
+log = logging.getLogger(__name__)
+
 MAX_NODES_PER_HISTORY_READ = 1000
+# Values per node per call; more come with a continuation point. Building and encoding a reply runs
+# on the scan's event loop (~10 ms for 1,000 values here, ten times that for 10,000): clients page.
+MAX_RETURN_DATA_VALUES = 1_000
 _CONTINUATION_MAGIC = b"SPH1"
 _EPOCH_MIN = datetime(1601, 1, 2, tzinfo=timezone.utc)  # before this a DateTime means "not given"
+_DOUBLE_AGGREGATES = frozenset({"Average", "TimeAverage", "TimeAverage2", "Total", "Total2"})
+_BAD = ua.StatusCodes
 
 
 @dataclass(frozen=True)
 class Sample:
-    """One historical value of a tag."""
+    """One historical value of a tag (`status`: the exact StatusCode, when more than the quality)."""
 
     time: float  # epoch seconds, runtime clock (as tag timestamps)
     value: Any
     quality: Quality = Quality.GOOD
+    status: int | None = None
 
 
 @dataclass(frozen=True)
@@ -77,6 +92,10 @@ class HistoryPage:
 
     samples: Sequence[Sample]
     resume: bytes | None = None
+
+
+class HistoryUnavailable(Exception):
+    """The historian cannot read now (e.g. its database is unreachable)."""
 
 
 class HistoryProvider(Protocol):
@@ -100,58 +119,145 @@ class NoHistory:
 class TagHistoryService(HistoryManager):
     """asyncua's history manager with HistoryRead answered per item from a HistoryProvider."""
 
-    def __init__(self, iserver: Any, db: TagDatabase, namespace_index: int, provider: HistoryProvider) -> None:
+    def __init__(self, iserver: Any, db: TagDatabase, namespace_index: int, provider: HistoryProvider,
+                 run_blocking: Callable[..., Awaitable[Any]] | None = None) -> None:
+        """`run_blocking(function)`: where to build the DataValues of a reply (the runtime clock's: off the loop)."""
         super().__init__(iserver)
         self.db = db
         self.ns = namespace_index
         self.provider = provider
+        self._run_blocking = run_blocking
 
     async def read_history(self, params: ua.HistoryReadParameters) -> list[ua.HistoryReadResult]:
         items = params.NodesToRead or []
         if not items:
-            raise ServiceError(ua.StatusCodes.BadNothingToDo)
+            raise ServiceError(_BAD.BadNothingToDo)
         if len(items) > MAX_NODES_PER_HISTORY_READ:
-            raise ServiceError(ua.StatusCodes.BadTooManyOperations)
+            raise ServiceError(_BAD.BadTooManyOperations)
         if params.TimestampsToReturn not in (ua.TimestampsToReturn.Source, ua.TimestampsToReturn.Server, ua.TimestampsToReturn.Both):
-            raise ServiceError(ua.StatusCodes.BadTimestampsToReturnInvalid)
+            raise ServiceError(_BAD.BadTimestampsToReturnInvalid)
         details = params.HistoryReadDetails
-        if not isinstance(details, (ua.ReadRawModifiedDetails, ua.ReadProcessedDetails, ua.ReadAtTimeDetails,
-                                    ua.ReadEventDetails, ua.ReadAnnotationDataDetails)):
-            raise ServiceError(ua.StatusCodes.BadHistoryOperationInvalid)
-        raw = isinstance(details, ua.ReadRawModifiedDetails) and not details.IsReadModified
-        return [await self._read_one(item, details if raw else None, params) for item in items]
+        if isinstance(details, ua.ReadRawModifiedDetails) and not details.IsReadModified:
+            return [await self._item(item, params, lambda tag, resume: self._raw(tag, details, resume)) for item in items]
+        if isinstance(details, ua.ReadProcessedDetails) and hasattr(self.provider, "read_processed"):
+            aggregates = details.AggregateType or []
+            if len(aggregates) != len(items):
+                return [_status(_BAD.BadAggregateListMismatch) for _ in items]
+            return [await self._item(item, params, lambda tag, resume, kind=kind: self._processed(tag, details, kind, resume))
+                    for item, kind in zip(items, aggregates)]
+        if isinstance(details, ua.ReadAtTimeDetails) and hasattr(self.provider, "read_at_time"):
+            return [await self._item(item, params, lambda tag, resume: self._at_time(tag, details, resume)) for item in items]
+        if isinstance(details, (ua.ReadRawModifiedDetails, ua.ReadProcessedDetails, ua.ReadAtTimeDetails,
+                                ua.ReadEventDetails, ua.ReadAnnotationDataDetails)):
+            return [await self._item(item, params, None) for item in items]
+        raise ServiceError(_BAD.BadHistoryOperationInvalid)
 
-    async def _read_one(self, item: ua.HistoryReadValueId, raw: ua.ReadRawModifiedDetails | None,
-                        params: ua.HistoryReadParameters) -> ua.HistoryReadResult:
+    async def _item(self, item: ua.HistoryReadValueId, params: ua.HistoryReadParameters, read: Any) -> ua.HistoryReadResult:
+        """Checks common to every kind of read, then `read(tag, resume)` → (samples, variant type, resume) or a status."""
         node_id = item.NodeId
         if node_id not in self.iserver.aspace:
-            return _status(ua.StatusCodes.BadNodeIdUnknown)
+            return _status(_BAD.BadNodeIdUnknown)
         tag = node_id.Identifier if node_id.NamespaceIndex == self.ns and isinstance(node_id.Identifier, str) else None
-        if tag is None or tag not in self.db or not self.provider.historized(tag) or raw is None:
-            return _status(ua.StatusCodes.BadHistoryOperationUnsupported)
+        if tag is None or tag not in self.db or not self.provider.historized(tag) or read is None:
+            return _status(_BAD.BadHistoryOperationUnsupported)
         if item.IndexRange:
-            return _status(ua.StatusCodes.BadIndexRangeInvalid)
+            return _status(_BAD.BadIndexRangeInvalid)
         resume = None
         if item.ContinuationPoint:
             resume = _unwrap(item.ContinuationPoint, tag)
             if resume is None:
-                return _status(ua.StatusCodes.BadContinuationPointInvalid)
+                return _status(_BAD.BadContinuationPointInvalid)
         if params.ReleaseContinuationPoints:
             return ua.HistoryReadResult(HistoryData=ua.HistoryData())  # stateless: nothing to free
         try:
-            page = await self.provider.read_raw(tag, _epoch(raw.StartTime), _epoch(raw.EndTime), int(raw.NumValuesPerNode), resume)
+            outcome = await read(tag, resume)
         except ValueError:
-            return _status(ua.StatusCodes.BadContinuationPointInvalid)
-        variant_type = VARIANT_TYPES[self.db[tag].definition.type]
-        values = [_data_value(sample, variant_type, params.TimestampsToReturn) for sample in page.samples]
+            return _status(_BAD.BadContinuationPointInvalid if resume is not None else _BAD.BadInvalidArgument)
+        except HistoryUnavailable as error:
+            log.debug("history of %s unavailable: %s", tag, error)
+            return _status(_BAD.BadResourceUnavailable)
+        if isinstance(outcome, int):
+            return _status(outcome)
+        samples, variant_type, more = outcome
+        timestamps = params.TimestampsToReturn
+
+        def build() -> list[ua.DataValue]:
+            return [_data_value(sample, variant_type, timestamps) for sample in samples]
+
+        # ~2.5 ms per 1,000 values: a worker thread's, not the scan's.
+        values = await self._run_blocking(build) if self._run_blocking is not None and len(samples) > 50 else build()
         result = ua.HistoryReadResult(HistoryData=ua.HistoryData(DataValues=values))
-        if page.resume is not None:
-            result.ContinuationPoint = _wrap(tag, page.resume)
+        if more is not None:
+            result.ContinuationPoint = _wrap(tag, more)
+        elif not values:
+            result.StatusCode = ua.StatusCode(_BAD.GoodNoData)
         return result
+
+    def _variant_type(self, tag: str) -> ua.VariantType:
+        return VARIANT_TYPES[self.db[tag].definition.type]
+
+    async def _raw(self, tag: str, details: ua.ReadRawModifiedDetails, resume: bytes | None) -> Any:
+        limit = _limit(details.NumValuesPerNode)
+        start, end = _epoch(details.StartTime), _epoch(details.EndTime)
+        if details.ReturnBounds:
+            page = await self.provider.read_raw(tag, start, end, limit, resume, bounds=True)  # type: ignore[call-arg]
+        else:
+            page = await self.provider.read_raw(tag, start, end, limit, resume)
+        return page.samples, self._variant_type(tag), page.resume
+
+    async def _processed(self, tag: str, details: ua.ReadProcessedDetails, kind: ua.NodeId, resume: bytes | None) -> Any:
+        provider: Any = self.provider
+        name = AGGREGATE_NAMES.get(kind.Identifier) if kind.NamespaceIndex == 0 else None
+        if name is None or name not in provider.aggregates:
+            return _BAD.BadAggregateNotSupported
+        if not getattr(provider, "supports", lambda tag, name: True)(tag, name):
+            return _BAD.BadAggregateNotSupported  # e.g. an average of a string
+        start, end = _epoch(details.StartTime), _epoch(details.EndTime)
+        interval = details.ProcessingInterval or 0.0
+        if resume is None and (start is None or end is None or start == end or interval < 0):
+            return _BAD.BadInvalidArgument  # all three are needed; start == end has no interval (Part 13 Table 12)
+        config = _config(details.AggregateConfiguration)
+        if isinstance(config, int):
+            return config
+        page = await provider.read_processed(tag, start, end, interval / 1000, name, config, MAX_RETURN_DATA_VALUES, resume)
+        variant = (ua.VariantType.Double if name in _DOUBLE_AGGREGATES
+                   else ua.VariantType.Int32 if name == "Count" else self._variant_type(tag))
+        return page.samples, variant, page.resume
+
+    async def _at_time(self, tag: str, details: ua.ReadAtTimeDetails, resume: bytes | None) -> Any:
+        if resume is not None:
+            raise ValueError("at-time reads give no continuation points")
+        times = [_epoch(moment) for moment in details.ReqTimes or []]
+        if any(moment is None for moment in times) or len(times) > MAX_RETURN_DATA_VALUES:
+            return _BAD.BadInvalidArgument
+        samples = await self.provider.read_at_time(tag, times, bool(details.UseSimpleBounds))  # type: ignore[attr-defined]
+        return samples, self._variant_type(tag), None
+
+
+# Part 13 aggregates by the NodeId of their AggregateFunction object (namespace 0).
+AGGREGATE_NAMES: dict[int, str] = {
+    getattr(ua.ObjectIds, attribute): attribute[len("AggregateFunction_"):]
+    for attribute in dir(ua.ObjectIds) if attribute.startswith("AggregateFunction_")
+}
 
 
 def _status(code: int) -> ua.HistoryReadResult:
     return ua.HistoryReadResult(StatusCode=ua.StatusCode(code))
+
+
+def _limit(requested: int) -> int:
+    """NumValuesPerNode capped by the server's MaxReturnDataValues (0: no limit asked → the server's)."""
+    return MAX_RETURN_DATA_VALUES if not requested or requested > MAX_RETURN_DATA_VALUES else int(requested)
+
+
+def _config(configuration: ua.AggregateConfiguration | None) -> tuple[bool, int, int] | None | int:
+    """The client's AggregateConfiguration, None for the server's defaults, or BadAggregateConfigurationRejected."""
+    if configuration is None or configuration.UseServerCapabilitiesDefaults:
+        return None
+    bad, good = int(configuration.PercentDataBad), int(configuration.PercentDataGood)
+    if not (0 <= bad <= 100 and 0 <= good <= 100) or good < 100 - bad:
+        return _BAD.BadAggregateConfigurationRejected
+    return bool(configuration.TreatUncertainAsBad), bad, good
 
 
 def _epoch(moment: datetime | None) -> float | None:
@@ -167,7 +273,9 @@ def _data_value(sample: Sample, variant_type: ua.VariantType, timestamps: ua.Tim
     stamp = datetime.fromtimestamp(sample.time, timezone.utc)
     source = stamp if timestamps != ua.TimestampsToReturn.Server else None
     server = stamp if timestamps != ua.TimestampsToReturn.Source else None
-    return ua.DataValue(ua.Variant(sample.value, variant_type), STATUS_CODES[sample.quality], source, server)
+    status = ua.StatusCode(sample.status) if sample.status is not None else STATUS_CODES[sample.quality]
+    variant = ua.Variant(sample.value, variant_type) if sample.value is not None else ua.Variant()
+    return ua.DataValue(variant, status, source, server)
 
 
 def _wrap(tag: str, resume: bytes) -> bytes:

@@ -36,6 +36,8 @@ from softplc.opcua.browsing import MAX_CONTINUATION_POINTS
 from softplc.opcua.commands import CommandsDoor  # the door to runtime.commands
 from softplc.opcua.conditions import AlarmConditions  # Part 9 conditions
 from softplc.opcua.history import MAX_NODES_PER_HISTORY_READ, HistoryProvider, NoHistory, TagHistoryService
+from softplc.opcua.history_capabilities import advertise_history
+from softplc.opcua.history_provider import CommandHistory  # the historian's commands, when it runs
 from softplc.opcua.publisher import Publisher
 from softplc.opcua.roles import RolePermissions
 from softplc.opcua.scheduling import ScanGuard
@@ -61,6 +63,7 @@ class OpcUaServer:
 
     def __init__(self, settings: OpcUaSettings | None = None, *, history: HistoryProvider | None = None) -> None:
         self.settings = settings or OpcUaSettings()
+        self._given_history = history
         self.history: HistoryProvider = history or NoHistory()  # a historian plugs in here (history.py)
         self.endpoint = self.settings.endpoint
         self.namespace_index = 0
@@ -98,6 +101,9 @@ class OpcUaServer:
         self.pki = Pki(settings.pki_path(runtime.state_dir))
         self._secured_channels = SecuredChannels()
         self.guard = ScanGuard.for_runtime(runtime)
+        if self._given_history is None:
+            # The historian (started before us, softplc/adapters.py) serves its reads as commands.
+            self.history = await CommandHistory.connect(runtime.commands) or NoHistory()
         self.user_manager = SoftplcUserManager(self.users, settings.anonymous_role)
         server = GuardedServer(
             user_manager=self.user_manager,
@@ -165,6 +171,7 @@ class OpcUaServer:
             await server.get_node(ua.NodeId(limit)).write_value(ua.Variant(value, ua.VariantType.UInt32))
         await server.get_node(ua.NodeId(ua.ObjectIds.Server_ServerCapabilities_MaxBrowseContinuationPoints)).write_value(
             ua.Variant(MAX_CONTINUATION_POINTS, ua.VariantType.UInt16))
+        await advertise_history(server, getattr(self.history, "aggregates", ()), data=not isinstance(self.history, NoHistory))
         self.namespace_index = await server.register_namespace(settings.namespace)
         await self._configure_security(server)
         await self._build_address_space(runtime)
@@ -238,7 +245,7 @@ class OpcUaServer:
         self.node_count = builder.node_count
         self.writes = TagAttributeService(iserver.aspace, db, ns)
         iserver.attribute_service = self.writes
-        iserver.history_manager = TagHistoryService(iserver, db, ns, self.history)
+        iserver.history_manager = TagHistoryService(iserver, db, ns, self.history, runtime.clock.run_blocking)
         # UserAccessLevel per session role: asyncua's attribute service reads without the session.
         self.server.subscribe_server_callback(CallbackType.PostRead, self.writes.user_access_level)
 
