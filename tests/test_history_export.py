@@ -86,4 +86,4 @@ def test_export_says_clearly_when_there_is_nothing(recorded: Path, tmp_path: Pat
     code, _, err = run(capsys, "export", "wave", "--sim", "--config", str(recorded), "--from", "yesterday")
     assert code == 1 and "bad time 'yesterday'" in err
     code, _, err = run(capsys, "export", "state", "--sim", "--config", str(recorded), "--interval", "1s")
-    assert code == 1 and "aggregate average needs a numeric tag; state is a string" in err
+    assert code == 1 and "aggregate time_average needs a numeric tag; state is a string" in err

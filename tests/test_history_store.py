@@ -135,39 +135,6 @@ def test_a_day_is_plotted_in_at_most_n_points_and_no_spike_vanishes(store: Store
     assert len(month.samples) <= 500 and {99.0, -5.0, 120.0} <= {s.value for s in month.samples}
 
 
-def test_processed_aggregates_are_time_weighted_and_follow_part_13(store: Store) -> None:
-    # level (sloped): 0 at 0 s, 10 at 10 s, 10 at 30 s.   count (stepped): the same values.
-    store.write([(name, T0 + t, v, GOOD) for name in ("level", "count") for t, v in ((0, 0), (10, 10), (30, 10))])
-    average = store.reader.processed("level", T0, T0 + 30, 15, Aggregate.AVERAGE)
-    # [0, 15): trapezoid 0→10 over 10 s (area 50) + 10 for 5 s (50) = 100 / 15; [15, 30): 10.
-    assert [round(s.value, 6) for s in average] == [round(100 / 15, 6), 10.0]
-    assert [s.quality for s in average] == [GOOD, GOOD]
-    stepped = store.reader.processed("count", T0, T0 + 30, 15, Aggregate.AVERAGE)
-    assert [round(s.value, 6) for s in stepped] == [round(50 / 15, 6), 10.0]  # 0 for 10 s, 10 for 5 s
-    minimum = store.reader.processed("level", T0, T0 + 30, 15, Aggregate.MINIMUM)
-    maximum = store.reader.processed("level", T0, T0 + 30, 15, Aggregate.MAXIMUM_ACTUAL_TIME)
-    assert (minimum[0].time - T0, minimum[0].value) == (0, 0.0) and minimum[1].quality is BAD  # no raw value in [15, 30)
-    assert (maximum[0].time - T0, maximum[0].value) == (10, 10.0)
-    interpolated = store.reader.processed("level", T0, T0 + 20, 5, Aggregate.INTERPOLATIVE)
-    assert [s.value for s in interpolated] == [0.0, 5.0, 10.0, 10.0]
-    assert [s.value for s in store.reader.processed("level", T0, T0 + 30, 10, Aggregate.COUNT)] == [1, 1, 0]
-
-
-def test_a_bad_value_is_a_gap_in_the_average(store: Store) -> None:
-    store.write([("level", T0, 0.0, GOOD), ("level", T0 + 10, 5.0, BAD), ("level", T0 + 20, 10.0, GOOD)])
-    (result,) = store.reader.processed("level", T0, T0 + 30, 30, Aggregate.AVERAGE)
-    # 0 held for [0, 10) (the next value is bad), gap [10, 20), 10 for [20, 30): (0 + 100) / 20.
-    assert result.value == pytest.approx(5.0) and result.quality is Quality.UNCERTAIN
-
-
-def test_values_at_times_are_interpolated_sloped_or_stepped(store: Store) -> None:
-    store.write([(name, T0 + t, v, GOOD) for name in ("level", "count") for t, v in ((0, 0), (10, 10))])
-    at = store.reader.at_time("level", [T0 - 1, T0, T0 + 2.5, T0 + 10, T0 + 15])
-    assert at[0] is None
-    assert [(s.value, s.quality) for s in at[1:]] == [(0.0, GOOD), (2.5, GOOD), (10.0, GOOD), (10.0, Quality.UNCERTAIN)]
-    assert [s.value for s in store.reader.at_time("count", [T0 + 2.5, T0 + 15])] == [0, 10]
-
-
 def test_two_plants_share_one_store(storage_settings: StorageSettings) -> None:
     first = Store(storage_settings, plant="north")
     second = Store(storage_settings, plant="south")

@@ -2,8 +2,9 @@
 
 Modules: `settings` (the `history:` section and its rules), `swinging_door` (the compression
 algorithm), `recorder` (the adapter), `store` (tables and the writer-side sink), `queries`
-(raw, plot, processed, at time), `aggregates` (interpolation and Part 13 aggregates), `export`
-(`softplc history export`). See docs/history.md. The core never imports this package.
+(raw, plot, processed, at time), `aggregates` and `bounds` (Part 13 aggregates and bounding
+values), `reads` (Part 11 reads page by page), `commands` (the `history.*` commands other adapters
+call), `export` (`softplc history export`). See docs/history.md. The core never imports this package.
 """
 
 from softplc.lazy import lazy_exports
@@ -12,6 +13,6 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "softplc.history.settings": ("HistorySettings", "Rule", "TagPolicy", "problems", "tag_rule"),
     "softplc.history.recorder": ("HistoryRecorder", "TagFilter"),
     "softplc.history.queries": ("Continuation", "HistoryReader", "Plot", "RawPage", "UnknownTag"),
-    "softplc.history.aggregates": ("Aggregate", "Sample"),
+    "softplc.history.aggregates": ("Aggregate", "AggregateConfig", "Flags", "Result", "Sample"),
     "softplc.history.swinging_door": ("SwingingDoor",),
 })

@@ -16,6 +16,7 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TextIO
+from softplc.history.aggregates import Aggregate
 
 EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
 
@@ -40,8 +41,9 @@ def add_commands(subparsers: Any) -> None:
     export.add_argument("--to", dest="end", metavar="TIME", help="end, excluded (default: after the last sample)")
     export.add_argument("--format", choices=("csv", "json"), default="csv")
     export.add_argument("--interval", metavar="DURATION", help="one processed value per interval instead of the raw samples")
-    export.add_argument("--aggregate", default="average", choices=("average", "minimum", "maximum", "interpolative", "count"),
-                        help="with --interval: which value per interval (default average, time-weighted)")
+    export.add_argument("--aggregate", default="time_average", choices=[a.value for a in Aggregate],
+                        help="with --interval: which value per interval, OPC UA Part 13's (default time_average: time-weighted; "
+                             "average is the plain mean of the stored values)")
     export.add_argument("--output", "-o", type=Path, metavar="FILE", help="write to FILE instead of standard output")
     _common(export)
     export.set_defaults(func=cmd_export)
@@ -115,7 +117,6 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from softplc.history.aggregates import Aggregate
     from softplc.storage import parse_span
 
     reader = _reader(args)

@@ -2,9 +2,9 @@
 
 `HistoryReader(database, plant)` opens its own connection and may be used from any thread (one
 call at a time; calls block on I/O, so from the event loop use `clock.run_blocking`). What an
-OPC UA HistoryRead provider needs: `historized()`, `raw()` with a limit and a `Continuation`,
-`processed()` with Part 13 aggregates, `at_time()`; what a trend page needs: `plot()`.
-Ranges are half-open, [start, end).
+OPC UA HistoryRead needs: `historized()`, `raw()` with a limit, a `Continuation`, bounds and
+either direction, `processed()` with Part 13 aggregates, `at_time()`; what a trend page needs:
+`plot()`. Ranges are half-open, [start, end) — reading backwards, (end, start].
 """
 
 from __future__ import annotations
@@ -15,7 +15,9 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from softplc.history.aggregates import Aggregate, Sample, decimate, extreme, interpolate, time_weighted_average
+from softplc.history import aggregates
+from softplc.history.aggregates import DEFAULT_CONFIG, Aggregate, AggregateConfig, Flags, Result, Sample, decimate, intervals
+from softplc.history.bounds import Series, interpolated_bound, simple_bound
 from softplc.history.store import LEVELS, QUALITIES, TagInfo
 from softplc.storage import Database, StorageError
 from softplc.tags import Quality
@@ -32,7 +34,11 @@ class Continuation(NamedTuple):
 
 @dataclass
 class RawPage:
-    """Raw samples of one read, the bounding values if asked for, and where to go on (None: done)."""
+    """Raw samples of one read, the bounding values if asked for, and where to go on (None: done).
+
+    Reading backwards the bounds are mirrored: `before` is the first sample after start, `after`
+    the last sample at or before end.
+    """
 
     samples: list[Sample]
     continuation: Continuation | None = None
@@ -88,20 +94,31 @@ class HistoryReader:
     # -- raw ------------------------------------------------------------------------------
 
     def raw(self, tag: str, start: float, end: float, *, limit: int | None = None,
-            continuation: Continuation | None = None, bounds: bool = False) -> RawPage:
-        """Samples in [start, end) in time order; at most `limit`, then a continuation to pass back."""
+            continuation: Continuation | None = None, bounds: bool = False, reverse: bool = False) -> RawPage:
+        """Samples in [start, end) in time order — with `reverse`, in (end, start] newest first; at most
+        `limit`, then a continuation to pass back."""
         tag_id, info = self._tag(tag)
         begin, skip = (continuation.time, continuation.skip) if continuation else (start, 0)
         wanted = None if limit is None else limit + 1  # one more tells whether the read goes on
         samples: list[Sample] = []
-        for table in self._partitions(begin, end):
+        if reverse:
+            tables = list(reversed(self._partitions(end, begin, inclusive=True)))
+            condition, order = "time > ? AND time <= ?", "DESC"
+            arguments: tuple[float, float] = (end, begin)
+        else:
+            tables = self._partitions(begin, end)
+            condition, order = "time >= ? AND time < ?", "ASC"
+            arguments = (begin, end)
+        for table in tables:
             need = None if wanted is None else wanted - len(samples) + skip
-            sql = f"SELECT time, value, text, quality FROM {table} WHERE tag = ? AND time >= ? AND time < ? ORDER BY time, quality, value, text"
-            rows = self._query(sql + (f" LIMIT {int(need)}" if need is not None else ""), (tag_id, begin, end))
+            sql = (f"SELECT time, value, text, quality FROM {table} WHERE tag = ? AND {condition} "
+                   f"ORDER BY time {order}, quality {order}, value {order}, text {order}")
+            rows = self._query(sql + (f" LIMIT {int(need)}" if need is not None else ""), (tag_id, *arguments))
             converted = [_sample(row, info) for row in rows]
             if skip:
-                converted = converted[skip:]
-                skip = 0
+                dropped = min(skip, len(converted))
+                converted = converted[dropped:]
+                skip -= dropped
             samples.extend(converted)
             if wanted is not None and len(samples) >= wanted:
                 break
@@ -114,8 +131,12 @@ class HistoryReader:
                 same += continuation.skip
             page.continuation = Continuation(last, same)
         if bounds:
-            page.before = self._edge(tag_id, info, start, before=True)
-            page.after = self._edge(tag_id, info, end, before=False)
+            if reverse:
+                page.before = self._edge(tag_id, info, start, before=False, inclusive=False)
+                page.after = self._edge(tag_id, info, end, before=True, inclusive=True)
+            else:
+                page.before = self._edge(tag_id, info, start, before=True)
+                page.after = self._edge(tag_id, info, end, before=False)
         return page
 
     # -- plot -----------------------------------------------------------------------------
@@ -164,71 +185,51 @@ class HistoryReader:
 
     # -- processed and at time -------------------------------------------------------------
 
-    def processed(self, tag: str, start: float, end: float, interval: float, aggregate: Aggregate) -> list[Sample]:
-        """One result per interval of [start, end) (OPC UA ReadProcessed); BAD quality where there is no data."""
-        if interval <= 0:
-            raise ValueError("the processing interval must be positive")
-        tag_id, info = self._tag(tag)
-        if not info.numeric and aggregate not in (Aggregate.INTERPOLATIVE, Aggregate.COUNT):
-            raise ValueError(f"aggregate {aggregate.value} needs a numeric tag; {tag} is a {info.type}")
-        page = self.raw(tag, start, end, bounds=True)
-        samples = page.samples
-        after = page.after
-        results: list[Sample] = []
-        index = 0
-        previous = page.before if page.before is not None else None
-        count = max(1, math.ceil((end - start) / interval - 1e-9))
-        for number in range(count):
-            a = start + number * interval
-            b = min(end, a + interval)
-            inside: list[Sample] = []
-            while index < len(samples) and samples[index].time < b:
-                sample = samples[index]
-                if sample.time < a:
-                    previous = sample
-                else:
-                    inside.append(sample)
-                index += 1
-            following = samples[index] if index < len(samples) else after
-            results.append(self._aggregate(aggregate, info, a, b, previous, inside, following))
-            if inside:
-                previous = inside[-1]
-        return results
+    def processed(self, tag: str, start: float, end: float, interval: float, aggregate: Aggregate, *,
+                  config: AggregateConfig = DEFAULT_CONFIG, first: int = 0, count: int | None = None) -> list[Result]:
+        """One Part 13 aggregate per interval (OPC UA ReadProcessed), from interval number `first` (at most `count`).
 
-    def at_time(self, tag: str, times: Iterable[float]) -> list[Sample | None]:
-        """The value at each time (OPC UA ReadAtTime): stored, or interpolated; None where there is none before."""
+        Intervals as Part 13 §5.4.2.2 makes them (`aggregates.intervals`): `interval` 0 is one
+        interval; start > end reads backwards. ValueError for start == end, a negative interval,
+        or an aggregate that needs numbers on a string tag.
+        """
         tag_id, info = self._tag(tag)
-        results: list[Sample | None] = []
+        if aggregate.numeric and not info.numeric:
+            raise ValueError(f"aggregate {aggregate.value} needs a numeric tag; {tag} is a {info.type}")
+        chosen = list(intervals(start, end, interval, first, count))
+        if not chosen:
+            return []
+        low, high = min(i.low for i in chosen), max(i.high for i in chosen)
+        series = self._series(tag_id, info, low, high, config)
+        return [_aggregate(aggregate, series, span, config, stepped=info.stepped) for span in chosen]
+
+    def at_time(self, tag: str, times: Iterable[float], *, simple_bounds: bool = False,
+                config: AggregateConfig = DEFAULT_CONFIG) -> list[Result]:
+        """The value at each time (OPC UA ReadAtTime): the stored one (flags NONE), else a bounding value —
+        interpolated (default) or simple — flagged INTERPOLATED; BAD with NO_DATA where there is none."""
+        tag_id, info = self._tag(tag)
+        bound = simple_bound if simple_bounds else interpolated_bound
+        results = []
         for when in times:
-            before = self._edge(tag_id, info, when, before=True, inclusive=True, good_only=True)
-            after = None if info.stepped or (before is not None and before.time == when) else self._edge(tag_id, info, when, before=False, good_only=True)
-            results.append(interpolate(before, after, when, stepped=info.stepped))
+            series = self._series(tag_id, info, when, when, config, inclusive=True)
+            results.append(bound(series, when, stepped=info.stepped, config=config))
         return results
 
     # -- internals ------------------------------------------------------------------------
 
-    def _aggregate(self, aggregate: Aggregate, info: TagInfo, a: float, b: float, previous: Sample | None,
-                   inside: Sequence[Sample], following: Sample | None) -> Sample:
-        stepped = info.stepped
-        if aggregate is Aggregate.COUNT:
-            return Sample(a, len(inside))
-        if aggregate is Aggregate.INTERPOLATIVE:
-            if inside and inside[0].time == a:
-                return inside[0]
-            nxt = inside[0] if inside else following
-            return interpolate(previous, nxt, a, stepped=stepped) or Sample(a, None, Quality.BAD)
-        if aggregate is Aggregate.AVERAGE:
-            first = inside[0] if inside and inside[0].time == a else interpolate(previous, inside[0] if inside else following, a, stepped=stepped)
-            rest = [s for s in inside if s.time > a]
-            last_known = rest[-1] if rest else first
-            stop = interpolate(last_known, following, b, stepped=stepped) if following is not None and last_known is not None else None
-            return time_weighted_average(first, rest, stop, b, stepped=stepped)
-        largest = aggregate in (Aggregate.MAXIMUM, Aggregate.MAXIMUM_ACTUAL_TIME)
-        found = extreme(inside, largest=largest)
-        if found is None:
-            return Sample(a, None, Quality.BAD)
-        actual = aggregate in (Aggregate.MINIMUM_ACTUAL_TIME, Aggregate.MAXIMUM_ACTUAL_TIME)
-        return Sample(found.time if actual else a, found.value, found.quality)
+    def _series(self, tag_id: int, info: TagInfo, low: float, high: float, config: AggregateConfig,
+                *, inclusive: bool = False) -> Series:
+        """The samples from the last usable one before `low` to the first usable one after `high` (bounds need them)."""
+        limit = 0 if config.treat_uncertain_as_bad else 1
+        first = self._edge(tag_id, info, low, before=True, max_quality=limit)
+        last = self._edge(tag_id, info, high, before=False, max_quality=limit, strictly_after=inclusive)
+        begin = first.time if first is not None else low
+        stop = last.time if last is not None else high
+        rows: list[tuple[Any, ...]] = []
+        for table in self._partitions(begin, stop, inclusive=True):
+            rows += self._query(f"SELECT time, value, text, quality FROM {table} WHERE tag = ? AND time >= ? AND time <= ? "
+                                "ORDER BY time, quality, value, text", (tag_id, begin, stop))
+        return Series([_sample(row, info) for row in rows])
 
     def _numeric_rows(self, tag_id: int, start: float, end: float) -> list[tuple[float, float]]:
         rows: list[tuple[float, float]] = []
@@ -239,18 +240,20 @@ class HistoryReader:
                                 (tag_id, start, end))
         return rows
 
-    def _edge(self, tag_id: int, info: TagInfo, when: float, *, before: bool, inclusive: bool = False, good_only: bool = False) -> Sample | None:
-        """The last sample before `when` (or at it, if inclusive), or the first at or after it."""
-        relation = ("<=" if inclusive else "<") if before else ">="
+    def _edge(self, tag_id: int, info: TagInfo, when: float, *, before: bool, inclusive: bool = False,
+              max_quality: int | None = None, strictly_after: bool = False) -> Sample | None:
+        """The last sample before `when` (or at it, if inclusive), or the first at (unless strictly_after) or after it;
+        with `max_quality` (0 good, 1 uncertain), only samples of that quality or better that hold a value."""
+        relation = ("<=" if inclusive else "<") if before else (">" if strictly_after else ">=")
         order = "DESC" if before else "ASC"
-        quality = " AND quality < 2" if good_only else ""
+        quality = "" if max_quality is None else f" AND quality <= {int(max_quality)} AND (value IS NOT NULL OR text IS NOT NULL)"
         bound = "start <= ?" if before else "stop > ?"
-        partitions = self._query(f"SELECT name FROM history_partitions WHERE {bound} ORDER BY start {order}",
-                                 (when if math.isfinite(when) else (1e300 if when > 0 else -1e300),))
+        moment = when if math.isfinite(when) else (1e300 if when > 0 else -1e300)
+        partitions = self._query(f"SELECT name FROM history_partitions WHERE {bound} ORDER BY start {order}", (moment,))
         for (table,) in partitions:
             rows = self._query(f"SELECT time, value, text, quality FROM {table} WHERE tag = ? AND time {relation} ?{quality} "
                                f"ORDER BY time {order}, quality {order}, value {order}, text {order} LIMIT 1",
-                               (tag_id, when if math.isfinite(when) else (1e300 if when > 0 else -1e300)))
+                               (tag_id, moment))
             if rows:
                 return _sample(rows[0], info)
         return None
@@ -262,8 +265,10 @@ class HistoryReader:
         tag_id, kind, unit, stepped = rows[0]
         return int(tag_id), TagInfo(tag, kind, unit, bool(stepped))
 
-    def _partitions(self, start: float, end: float) -> list[str]:
-        rows = self._query("SELECT name FROM history_partitions WHERE stop > ? AND start < ? ORDER BY start", (start, end))
+    def _partitions(self, start: float, end: float, *, inclusive: bool = False) -> list[str]:
+        """The partitions holding times in [start, end) — [start, end] if inclusive — oldest first."""
+        relation = "<=" if inclusive else "<"
+        rows = self._query(f"SELECT name FROM history_partitions WHERE stop > ? AND start {relation} ? ORDER BY start", (start, end))
         return [name for (name,) in rows]
 
     def _query(self, sql: str, parameters: Sequence[Any]) -> list[tuple[Any, ...]]:
@@ -299,3 +304,24 @@ def _sample(row: tuple[Any, ...], info: TagInfo) -> Sample:
     if info.type.startswith(("int", "uint")):
         return Sample(float(when), int(value), quality)
     return Sample(float(when), float(value), quality)
+
+
+def _aggregate(aggregate: Aggregate, series: Series, span: aggregates.Interval, config: AggregateConfig, *, stepped: bool) -> Result:
+    """One interval's value of `aggregate` (Part 13 §5.4.3); PARTIAL where Part 13 sets it for a short interval."""
+    stamp, low, high = span.stamp, span.low, span.high
+    if aggregate is Aggregate.INTERPOLATIVE:
+        return interpolated_bound(series, stamp, stepped=stepped, config=config)
+    inside = series.between_backward(low, high) if span.backward else series.between(low, high)
+    if aggregate is Aggregate.AVERAGE:
+        return aggregates.average(stamp, inside, config)  # Part 13 never sets Partial on an Average
+    if aggregate is Aggregate.COUNT:
+        result = aggregates.count(stamp, inside, config)
+    elif aggregate is Aggregate.TIME_AVERAGE:
+        start = simple_bound(series, low, stepped=stepped, config=config)
+        end = simple_bound(series, high, stepped=stepped, config=config)
+        result = aggregates.time_average(stamp, low, high, start, series.inside(low, high), end, config, stepped=stepped)
+    else:
+        largest = aggregate in (Aggregate.MAXIMUM, Aggregate.MAXIMUM_ACTUAL_TIME)
+        actual = aggregate in (Aggregate.MINIMUM_ACTUAL_TIME, Aggregate.MAXIMUM_ACTUAL_TIME)
+        result = aggregates.extreme(stamp, inside, config, largest=largest, actual_time=actual)
+    return result._replace(flags=result.flags | Flags.PARTIAL) if span.partial else result

@@ -17,6 +17,8 @@ import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
+from softplc.history.commands import register_history_commands
+from softplc.history.queries import HistoryReader
 from softplc.history.settings import HistorySettings, TagPolicy
 from softplc.realtime import SWITCH_INTERVAL
 from softplc.history.store import SINK_NAME, HistorySink, TagInfo
@@ -107,6 +109,8 @@ class HistoryRecorder:
         self._due: list[tuple[float, str]] = []  # heartbeat deadlines (runtime wall time), a heap
         self._scheduled: set[str] = set()  # tags with an entry in _due (one each, so the heap stays small)
         self._runtime: Runtime | None = None
+        self._reader: HistoryReader | None = None
+        self._unregister: Any = None
 
     async def start(self, runtime: Runtime) -> None:
         from softplc.runtime import AdapterError
@@ -139,6 +143,9 @@ class HistoryRecorder:
                 raise AdapterError(f"history: cannot open {database.describe()}: {error}")
             log.warning("history: %s is unreachable (%s); recording continues in memory and is written when it is back", database.describe(), error)
         self.writer = writer
+        # Reads for other adapters (OPC UA HistoryRead, trends) go through runtime.commands.
+        self._reader = HistoryReader(database, self.plant)
+        self._unregister = register_history_commands(runtime, self._reader, {info.name: info for info in infos if info.name in runtime.db})
         db = runtime.db
         self.filters = {name: TagFilter(name, policy, self.types[name][0] != "string" and not self.types[name][0] == "bool")
                         for name, policy in self.policies.items() if name in db}
@@ -151,6 +158,12 @@ class HistoryRecorder:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
+        if self._unregister is not None:
+            self._unregister()
+            self._unregister = None
+        if self._reader is not None and self._runtime is not None:
+            await self._runtime.clock.run_blocking(self._reader.close)
+            self._reader = None
         writer = self.writer
         if writer is None:
             return
