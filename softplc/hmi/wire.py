@@ -40,7 +40,15 @@ def json_ready(value: Any) -> Any:
 
 def dumps(value: Any) -> str:
     """Compact JSON of `json_ready(value)`; never NaN or Infinity."""
-    return json.dumps(json_ready(value), separators=(",", ":"), ensure_ascii=False, allow_nan=False)
+    try:  # most values need no conversion but of enums and dataclasses: json's C encoder, 20-50x faster
+        return json.dumps(value, separators=(",", ":"), ensure_ascii=False, allow_nan=False, default=_default)
+    except (ValueError, TypeError):  # a non-finite float, or a key json cannot take: convert everything
+        return json.dumps(json_ready(value), separators=(",", ":"), ensure_ascii=False, allow_nan=False)
+
+
+def _default(value: Any) -> Any:
+    """What json's encoder cannot write itself (enums, dataclasses, sets...), converted."""
+    return json_ready(value)
 
 
 def json_response(value: Any, *, status: int = 200) -> web.Response:
