@@ -212,7 +212,11 @@ export function openDetails(ctx, title, tags, subtitle) {
       ? el('button', { type: 'button', class: 'btn small secondary', text: 'Write…', onclick: () => openWrite(ctx, meta).then(() => openDetails(ctx, title, tags, subtitle)) })
       : null;
     body.append(el('tr', { 'data-tag': meta.name },
-      el('td', {}, el('strong', { text: meta.name }), meta.description ? el('span', { class: 'd', text: meta.description }) : null),
+      el('td', {}, el('a', { href: '#', class: 'tag-link', title: 'Details and trend', text: meta.name, onclick: async (event) => {
+        event.preventDefault();
+        (await import('./tag_details.js')).openTagDetails(ctx, meta);
+      } }),
+      meta.description ? el('span', { class: 'd', text: meta.description }) : null),
       el('td', { class: 'v' }, value, el('br'), quality),
       el('td', {}, write),
     ));

@@ -166,7 +166,8 @@ export class Live extends EventTarget {
       case 'error':
         console.warn('HMI live channel:', message.message);
         break;
-      default:
+      default:  // other kinds (e.g. "alarms", alarm_feed.js) go to whoever listens for them
+        this.dispatchEvent(new CustomEvent('message', { detail: message }));
         break;
     }
   }
@@ -187,6 +188,9 @@ export class Live extends EventTarget {
       try { watcher.callback(names); } catch (error) { console.error('HMI watcher failed', error); }
     }
   }
+
+  /** Send a message of another kind (e.g. {type: 'alarms', on: true}); dropped while not connected. */
+  send(message) { this._send(message); }
 
   _send(message) {
     const socket = this._socket;

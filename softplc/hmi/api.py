@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from softplc.hmi.settings import HmiSettings
     from softplc.hmi.shell import Shell
     from softplc.hmi.views import View
+    from softplc.hmi.writelog import WriteLog
     from softplc.runtime import Runtime
 
 
@@ -58,6 +59,7 @@ class HmiServer(Protocol):
     shell: Shell
     origins: OriginPolicy
     views: dict[str, View]
+    writelog: WriteLog
 
 log = logging.getLogger(__name__)
 

@@ -135,8 +135,17 @@ class Client:
     # -- what to send ---------------------------------------------------------------------------
 
     def control(self, message: dict[str, Any]) -> None:
-        self._control.append(json.dumps(message, separators=(",", ":"), ensure_ascii=False).encode())
+        self.send_encoded(json.dumps(message, separators=(",", ":"), ensure_ascii=False).encode())
+
+    def send_encoded(self, data: bytes) -> None:
+        """Queue a message encoded once for many clients (alarm events); it goes before tag data."""
+        self._control.append(data)
         self._wake.set()
+
+    @property
+    def backlog(self) -> int:
+        """Messages queued and not yet sent (besides tag data, which never queues up)."""
+        return len(self._control)
 
     def offer(self, chunks: list[bytes], names: Iterable[str]) -> None:
         """The group's latest changes: send these chunks now, or remember the names if still busy."""

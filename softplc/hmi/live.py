@@ -7,6 +7,7 @@ Protocol (JSON text messages; docs/hmi.md):
     server → {"type": "snapshot", "time": 1767225600.1, "values": {"t01_iBL": 42.0, ...}, "done": true}
     server → {"type": "update", "time": T, "values": {...}, "times": {...}, "quality": {...}}
              only changed items, at most `rate` per second (fanout.py: the wire format)
+    client → {"type": "alarms", "on": true}   alarm snapshot, then alarm changes (alarm_feed.py)
     both   → {"type": "ping"} every `heartbeat` seconds; each side drops a peer silent for 2.5 of them
 
 The scan is never held up: `db.on_change` only hands the list of changed tags to a dispatcher
@@ -42,6 +43,7 @@ from softplc.tagdb import TagDatabase
 from softplc.tags import Tag
 
 if TYPE_CHECKING:
+    from softplc.hmi.alarm_feed import AlarmFeed
     from softplc.hmi.security import OriginPolicy
     from softplc.hmi.sessions import Sessions
 
@@ -77,6 +79,7 @@ class Hub:
         self._tasks: list[asyncio.Task[None]] = []
         self._unsubscribe: Any = None
         self.peer_log = PeerLog(log, service="HMI")
+        self.alarm_feed: AlarmFeed | None = None  # set by the server when the runtime has alarms
         self.dropped = 0  # clients dropped for being too slow or silent
         self.dispatch_seconds = 0.0
 
@@ -252,6 +255,8 @@ class Hub:
                 subscriber.handle(message.data)
         finally:
             subscriber.cancel()
+            if self.alarm_feed is not None:
+                self.alarm_feed.leave(client)
             self._leave(client)
             self.clients.discard(client)
             await client.stop()
@@ -267,6 +272,7 @@ class _Subscriber:
         self._wanted: list[str] | None = None
         self._timer: asyncio.TimerHandle | None = None
         self._last = 0.0
+        self._joining: asyncio.Task[None] | None = None
 
     def handle(self, text: str) -> None:
         try:
@@ -286,8 +292,19 @@ class _Subscriber:
             else:
                 self._wanted = list(dict.fromkeys(items))
                 self._schedule()
+        elif kind == "alarms":
+            self._alarms(message.get("on", True))
         elif kind != "pong":
             self.client.control({"type": "error", "message": f"unknown message type {kind!r}"})
+
+    def _alarms(self, on: Any) -> None:
+        feed = self.hub.alarm_feed
+        if feed is None:
+            self.client.control({"type": "error", "message": "this runtime has no alarms"})
+        elif on is False:
+            feed.leave(self.client)
+        elif self.client not in feed.clients and (self._joining is None or self._joining.done()):
+            self._joining = asyncio.create_task(feed.join(self.client), name="hmi-alarms-join")
 
     def _schedule(self) -> None:
         if self._timer is not None:
@@ -306,6 +323,8 @@ class _Subscriber:
             self.client.control({"type": "unknown", "items": unknown[:100], "count": len(unknown)})
 
     def cancel(self) -> None:
+        if self._joining is not None:
+            self._joining.cancel()
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None

@@ -19,8 +19,11 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
+from softplc.hmi.alarm_feed import AlarmFeed
 from softplc.hmi.browser import open_later
 from softplc.hmi.api import Api
+from softplc.hmi.command_door import CommandDoor
+from softplc.hmi.journal_export import JournalExport
 from softplc.hmi.assets import AssetsNotFound, find_assets
 from softplc.hmi.expressions import ExpressionTable
 from softplc.hmi.live import Hub
@@ -29,6 +32,7 @@ from softplc.hmi.security import OriginPolicy, middleware
 from softplc.hmi.sessions import Sessions
 from softplc.hmi.settings import HmiSettings, hmi_problems
 from softplc.hmi.shell import Shell, builtin_pages
+from softplc.hmi.supervisory import add_supervisory
 from softplc.hmi.views import View, load_views
 from softplc.hmi.writelog import WriteLog
 from softplc.logins import PasswordLogins
@@ -89,6 +93,11 @@ class HmiServer:
                        max_clients=settings.max_clients)
         self.origins = OriginPolicy(settings.allowed_origins, extra_hosts=(settings.host.lower(),))
         self.shell.pages[:0] = builtin_pages(self.plant.has_fleet, [(view.name, view.title) for view in self.views.values()])
+        add_supervisory(self.shell, runtime.commands, self.assets)  # alarms, journal, trends: when the runtime has them
+        if "alarms.summary" in runtime.commands:
+            self.hub.alarm_feed = AlarmFeed(runtime.commands, runtime.events, self.hub.pacer, runtime.clock.wall,
+                                            rate=settings.max_update_rate)
+        self.writelog = WriteLog()
         self.shell.started = True
         app = self._application()
         ssl_context = await self._ssl_context(runtime) if settings.tls else None
@@ -105,9 +114,10 @@ class HmiServer:
         self.port = _bound_port(runner, settings.port)
         self.sessions.set_port(self.port)
         self.url = f"{settings.scheme}://{_url_host(settings.host)}:{self.port}/"
-        self._writelog = WriteLog()
-        self._unsubscribe_writes = db.on_write(self._writelog)
+        self._unsubscribe_writes = db.on_write(self.writelog)
         self.hub.start()
+        if self.hub.alarm_feed is not None:
+            self.hub.alarm_feed.start()
         if settings.anonymous_role is not None and not settings.loopback:
             log.warning("HMI on %s lets anyone who reaches it look at the plant without logging in (servers.hmi.anonymous: viewer)", settings.host)
         if settings.open_browser:
@@ -118,6 +128,8 @@ class HmiServer:
             self._unsubscribe_writes()
             self._unsubscribe_writes = None
         if self._runner is not None:
+            if self.hub.alarm_feed is not None:
+                await self.hub.alarm_feed.stop()
             await self.hub.stop()  # close every live client first: the runner waits for open handlers
             await self._runner.cleanup()
             self._runner = None
@@ -143,6 +155,8 @@ class HmiServer:
 
         app.add_routes([web.get("/", page), web.get("/index.html", page)])
         app.add_routes(Api(self).routes())
+        app.add_routes(CommandDoor(self).routes())
+        app.add_routes(JournalExport(self).routes())
         app.add_routes(self.shell.routes)
         app.router.add_static("/static/", self.assets, follow_symlinks=False)
         modules = self.assets / "node_modules"

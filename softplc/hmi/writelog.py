@@ -1,4 +1,4 @@
-"""The HMI's write log: every write made from a browser or the JSON API, accepted or refused, with its user.
+"""The HMI's write log: every write and command made from a browser or the JSON API, accepted or refused, with its user.
 
 It listens on the tag database's write listeners (`db.on_write`), the hook the durable audit
 trail uses as well, and keeps only the writes whose origin is the HMI. A script that writes in
@@ -13,7 +13,7 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from softplc.tagdb import WriteEvent
+from softplc.tagdb import Origin, WriteEvent
 
 log = logging.getLogger("softplc.hmi")
 
@@ -29,7 +29,7 @@ class _Budget:
 
 
 class WriteLog:
-    """`db.on_write` listener that logs the HMI's writes, rate-limited per user."""
+    """`db.on_write` listener that logs the HMI's writes (and, told by the commands door, its commands), rate-limited per user."""
 
     def __init__(self, interval: float = 10.0, burst: int = 5) -> None:
         self.interval = interval
@@ -41,16 +41,37 @@ class WriteLog:
             if event.origin.source == SOURCE:
                 self._log(event)
 
-    def _log(self, event: WriteEvent) -> None:
-        who = str(event.origin)
+    def command(self, origin: Origin, name: str, accepted: bool, detail: str) -> None:
+        """Log a state-changing command called through the HMI (the same budget per user as writes)."""
+        budget = self._budget(str(origin)) or _Budget()
+        budget.lines += 1
+        if budget.lines > self.burst:
+            budget.suppressed += 1
+            budget.refused += not accepted
+            if len(budget.tags) < 5:
+                budget.tags[f"command {name}"] = None
+            return
+        role = origin.role.value if origin.role is not None else "runtime"
+        if accepted:
+            log.info("HMI command by %s (%s): %s%s", origin, role, name, f": {detail}" if detail else "")
+        else:
+            log.warning("HMI command by %s (%s) refused: %s: %s", origin, role, name, detail)
+
+    def _budget(self, who: str) -> _Budget | None:
+        """This interval's budget of `who` (None without an event loop: log every line)."""
         budget = self._budgets.get(who)
         if budget is None:
             budget = self._budgets[who] = _Budget()
             try:
                 asyncio.get_running_loop().call_later(self.interval, self._summarise, who)
-            except RuntimeError:  # no loop: nothing to summarise later, log every line
+            except RuntimeError:  # no loop: nothing to summarise later
                 del self._budgets[who]
-                budget = _Budget()
+                return None
+        return budget
+
+    def _log(self, event: WriteEvent) -> None:
+        who = str(event.origin)
+        budget = self._budget(who) or _Budget()
         budget.lines += 1
         if budget.lines > self.burst:
             budget.suppressed += 1

@@ -27,6 +27,7 @@ export async function mount(root, ctx) {
   for (const name of groups) group.append(el('option', { value: name, text: name }));
   if (ctx.params.group) group.value = ctx.params.group;
 
+  const openTag = async (tag) => (await import('../tag_details.js')).openTagDetails(ctx, tag);
   let rows = all;
   const pool = [];
   let rowHeight = 44;
@@ -43,8 +44,11 @@ export async function mount(root, ctx) {
     const range = el('span', { class: 'range num' });
     const access = el('span', { class: 'acc' });
     const action = el('span');
+    // The name opens the tag's details (with its trend when it is historized).
+    const nameCell = el('span', { class: 'name', role: 'button', tabindex: 0, title: 'Details and trend',
+      onclick: () => row.tag && openTag(row.tag), onkeydown: (event) => { if (event.key === 'Enter' && row.tag) openTag(row.tag); } }, name, description);
     const node = el('div', { class: 'vrow', role: 'row' },
-      el('span', { class: 'name' }, name, description), el('span', { class: 'val' }, value, unit),
+      nameCell, el('span', { class: 'val' }, value, unit),
       el('span', { class: 'qcol' }, quality), time, range, access, action);
     const row = { node, name, description, value, unit, quality, time, range, access, action, tag: null };
     body.append(node);
