@@ -24,6 +24,7 @@ from softplc.hmi.api import Api
 from softplc.hmi.assets import AssetsNotFound, find_assets
 from softplc.hmi.expressions import ExpressionTable
 from softplc.hmi.live import Hub
+from softplc.hmi.operations import install_operations
 from softplc.hmi.plant import PlantModel
 from softplc.hmi.security import OriginPolicy, middleware
 from softplc.hmi.sessions import Sessions
@@ -57,6 +58,7 @@ class HmiServer:
         self.settings = settings or HmiSettings.from_config(config)
         self.views: dict[str, View] = {view.name: view for view in load_views(config)[0]}
         self.shell = Shell()
+        install_operations(self)  # forcing, program control, online change, the audit page (operations.py)
         self.url = ""
         self.port: int | None = None
         self.assets: Path | None = None

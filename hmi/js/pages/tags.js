@@ -5,6 +5,7 @@
 import { el, clear, setText } from '../dom.js';
 import { allTagMeta } from '../api.js';
 import { formatValue, formatTime, formatRange, qualityName, qualityClass } from '../format.js';
+import { forcedMark, showForced } from '../ops/forcing.js';
 
 const OVERSCAN = 8;
 
@@ -34,7 +35,8 @@ export async function mount(root, ctx) {
   let visible = [];
 
   const makeRow = () => {
-    const name = el('span', { class: 'n' });
+    const name = el('span', { class: 'n', role: 'button', tabindex: 0, title: 'details' });
+    const forced = forcedMark(false);
     const description = el('span', { class: 'd' });
     const value = el('span', { class: 'live-value' });
     const unit = el('span', { class: 'u' });
@@ -44,9 +46,13 @@ export async function mount(root, ctx) {
     const access = el('span', { class: 'acc' });
     const action = el('span');
     const node = el('div', { class: 'vrow', role: 'row' },
-      el('span', { class: 'name' }, name, description), el('span', { class: 'val' }, value, unit),
+      el('span', { class: 'name' }, name, description), el('span', { class: 'val' }, forced, value, unit),
       el('span', { class: 'qcol' }, quality), time, range, access, action);
-    const row = { node, name, description, value, unit, quality, time, range, access, action, tag: null };
+    const row = { node, name, description, value, unit, quality, time, range, access, action, forced, tag: null };
+    // The tag's details: its live value and, for an engineer, force and unforce (ops/forcing.js).
+    const details = () => { if (row.tag) ctx.openDetails(row.tag.name, [row.tag], row.tag.description || ''); };
+    name.addEventListener('click', details);
+    name.addEventListener('keydown', (event) => { if (event.key === 'Enter') details(); });
     body.append(node);
     return row;
   };
@@ -103,6 +109,7 @@ export async function mount(root, ctx) {
       setText(row.quality, qualityName(quality));
       row.quality.className = `qual ${qualityName(quality)}`;
       setText(row.time, formatTime(item ? item.t : row.tag.timestamp));
+      showForced(row.forced, item ? item.f : row.tag.forced);
     }
   }
 
