@@ -125,6 +125,14 @@ class HmiServer:
             self._runner = None
             self.sessions.close()
 
+    def metrics(self) -> dict[str, Any]:
+        """Figures for /metrics (softplc/metrics/catalog.py): live clients, sessions, drops, messages encoded."""
+        if self._runner is None:
+            return {}
+        hub = self.hub
+        return {"clients": len(hub.clients), "sessions": len(self.sessions), "clients_dropped": hub.dropped,
+                "updates_encoded": hub.encoder.messages}
+
     def describe(self) -> str:
         settings = self.settings
         anonymous = "visitors may look without logging in" if settings.anonymous_role is not None else "log in to look"
