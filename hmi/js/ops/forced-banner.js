@@ -46,7 +46,7 @@ export function mount(node, ctx) {
     node.hidden = forces.length === 0;
     node.dataset.count = String(forces.length);
     if (!forces.length) return;
-    const named = forces.slice(0, SHOWN).map((force) => `${force.tag} = ${formatValue(force.value)}`).join(', ');
+    const named = forces.slice(0, SHOWN).map((force) => `${force.tag} = ${typeof force.value === 'number' ? String(force.value) : formatValue(force.value)}`).join(', ');
     const more = forces.length > SHOWN ? ` and ${forces.length - SHOWN} more` : '';
     setText(text, `${forces.length} tag${forces.length === 1 ? '' : 's'} forced: ${named}${more}. Programs and clients cannot change ${forces.length === 1 ? 'it' : 'them'}.`);
   };

@@ -20,16 +20,23 @@ function stamp(seconds) {
   return `${date.getFullYear()}-${pad(date.getMonth() + 1)}-${pad(date.getDate())} ${pad(date.getHours())}:${pad(date.getMinutes())}:${pad(date.getSeconds())}.${pad(date.getMilliseconds(), 3)}`;
 }
 
+/** A value as recorded, exactly (no rounding: the trail is evidence). */
+function exact(value) {
+  if (value === null || value === undefined) return '';
+  if (typeof value === 'number') return String(value);
+  return typeof value === 'object' ? JSON.stringify(value) : formatValue(value);
+}
+
 function what(row) {
   if (row.kind === 'write') return row.name;
   const args = row.arguments && typeof row.arguments === 'object' ? row.arguments : {};
   const shown = row.tag ? [row.tag] : [];
-  for (const [key, value] of Object.entries(args)) if (!row.tag || (key !== 'tag' && key !== 'value')) shown.push(`${key}=${formatValue(value)}`);
+  for (const [key, value] of Object.entries(args)) if (!row.tag || (key !== 'tag' && key !== 'value')) shown.push(`${key}=${exact(value)}`);
   return [row.name, ...shown].join(' ');
 }
 
 function result(row) {
-  if (row.accepted) return 'accepted';
+  if (row.accepted) return row.kind === 'command' && row.detail ? `accepted: ${row.detail}` : 'accepted';
   const rule = row.rule === 'refused' ? '' : `${row.rule}: `;
   return row.detail ? `refused: ${rule}${row.detail}` : `refused: ${row.rule}`;
 }
@@ -51,7 +58,7 @@ export async function mount(root, ctx) {
   const status = el('p', { class: 'muted small', role: 'status' });
   const body = el('tbody');
   const table = el('table', { class: 'data audit-table' },
-    el('thead', {}, el('tr', {}, ...['Time', 'Source', 'User', 'Peer', 'Tag / command', 'Old', 'New', 'Result'].map((text) => el('th', { text })))), body);
+    el('thead', {}, el('tr', {}, ...['Time', 'Source', 'User', 'Peer', 'Tag / command', 'Old', 'New', 'Result'].map((text) => el('th', { text, class: text === 'Old' || text === 'New' ? 'num' : null })))), body);
   const more = el('button', { type: 'button', class: 'btn secondary', text: 'More', hidden: true });
   root.append(el('section', { class: 'panel' },
     el('div', { class: 'panel-head' }, el('h1', { text: 'Audit trail' }),
@@ -103,8 +110,8 @@ export async function mount(root, ctx) {
         el('td', { text: row.user || (row.source === 'modbus' ? '—' : '') }),
         el('td', { class: 'small', text: row.peer }),
         el('td', { class: 'what', text: what(row) }),
-        el('td', { class: 'num', text: row.old === null || row.old === undefined ? '' : formatValue(row.old) }),
-        el('td', { class: 'num', text: row.new === null || row.new === undefined ? '' : formatValue(row.new) }),
+        el('td', { class: 'num', text: exact(row.old) }),
+        el('td', { class: 'num', text: exact(row.new) }),
         el('td', { class: row.accepted ? 'ok-text' : 'error-text', text: result(row) })));
     }
     offset += answer.result.length;

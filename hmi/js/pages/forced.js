@@ -13,7 +13,7 @@ export async function mount(root, ctx) {
   const body = el('tbody');
   const table = el('table', { class: 'data forced-table' },
     el('thead', {}, el('tr', {}, ...['Tag', 'Forced value', 'Before', 'Since', 'By', ''].map((text) => el('th', { text })))), body);
-  const tools = el('div', { class: 'toolbar' });
+  const tools = el('div', { class: 'toolbar force-tools' });
   if (engineer) {
     const input = el('input', { type: 'search', list: 'force-tag-names', placeholder: 'Tag name…', 'aria-label': 'Tag to force', id: 'force-tag' });
     const names = el('datalist', { id: 'force-tag-names' });
@@ -83,9 +83,9 @@ export async function mount(root, ctx) {
       }
       body.append(el('tr', { 'data-tag': force.tag },
         el('td', {}, el('strong', { text: force.tag }), meta.description ? el('span', { class: 'd', text: meta.description }) : null),
-        el('td', {}, mark, ' ', value),
-        el('td', { class: 'num', text: formatWithUnit(force.previous, unit) }),
-        el('td', { class: 'num', text: formatTime(force.since) }),
+        el('td', { class: 'tnum' }, mark, ' ', value),
+        el('td', { class: 'tnum', text: formatWithUnit(force.previous, unit) }),
+        el('td', { class: 'tnum', text: formatTime(force.since) }),
         el('td', { class: 'by', text: force.by }),
         actions));
       rows.set(force.tag, { value, mark, unit });
