@@ -248,5 +248,12 @@ def _hmi(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
     if not settings.enabled or bool(getattr(args, "no_hmi", False)):
         return []
     from softplc.hmi.server import HmiServer
+    from softplc.metrics.settings import MetricsSettings
 
-    return [HmiServer(config, settings)]
+    hmi = HmiServer(config, settings)
+    metrics = MetricsSettings.from_config(config)
+    if not metrics.enabled:
+        return [hmi]
+    from softplc.metrics.adapter import MetricsAdapter
+
+    return [MetricsAdapter(hmi, metrics), hmi]  # /metrics on the HMI's server; ready before it listens

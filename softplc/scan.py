@@ -40,8 +40,10 @@ class TaskStats:
     cycles: int = 0
     overruns: int = 0
     watchdog_trips: int = 0
+    resets: int = 0  # how many times reset (readers that accumulate, e.g. /metrics, see one happened)
 
     def reset(self) -> None:
+        self.resets += 1
         self.scan.reset()
         self.cycle.reset()
         self.latency.reset()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 
 class TimingSeries:
@@ -55,6 +56,21 @@ class TimingSeries:
         a, b, t = float(part[low]), float(part[high]), index - low
         difference = b - a
         return b - difference * (1.0 - t) if t >= 0.5 else a + difference * t  # numpy's _lerp
+
+    @property
+    def filled(self) -> int:
+        """How many recent samples the window holds."""
+        return self._filled
+
+    def recent(self, count: int) -> Any:
+        """The last `count` samples (at most the window's), oldest first, as a numpy array (a copy)."""
+        import numpy as np
+
+        count = max(0, min(count, self._filled))
+        end = self._index
+        if count <= end:
+            return self._window[end - count:end].copy()
+        return np.concatenate((self._window[len(self._window) - (count - end):], self._window[:end]))
 
     def summary(self) -> dict[str, float]:
         """min / max / mean / p99 in milliseconds."""

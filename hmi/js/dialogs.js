@@ -4,6 +4,7 @@
 import { el, clear, setText } from './dom.js';
 import { writeTag, post } from './api.js';
 import { formatValue, formatWithUnit, formatRange, qualityName } from './format.js';
+import { forcedMark, showForced, forceControls } from './ops/forcing.js';
 
 /** A new modal <dialog> with `node`, removed when closed (one at a time: an open one is closed). */
 function show(node, className) {
@@ -205,22 +206,25 @@ export function openLogin(ctx) {
 export function openDetails(ctx, title, tags, subtitle) {
   const rows = new Map();
   const body = el('tbody');
+  const reopen = () => openDetails(ctx, title, tags, subtitle);
   for (const meta of tags) {
     const value = el('span', { class: 'live-value' });
     const quality = el('span', { class: 'qual' });
+    const forced = forcedMark(meta.forced);
     const write = meta.writable
-      ? el('button', { type: 'button', class: 'btn small secondary', text: 'Write…', onclick: () => openWrite(ctx, meta).then(() => openDetails(ctx, title, tags, subtitle)) })
+      ? el('button', { type: 'button', class: 'btn small secondary', text: 'Write…', onclick: () => openWrite(ctx, meta).then(reopen) })
       : null;
+    const force = forceControls(ctx, meta, reopen);  // engineers: force / unforce (ops/forcing.js)
     body.append(el('tr', { 'data-tag': meta.name },
       el('td', {}, el('a', { href: '#', class: 'tag-link', title: 'Details and trend', text: meta.name, onclick: async (event) => {
         event.preventDefault();
         (await import('./tag_details.js')).openTagDetails(ctx, meta);
       } }),
       meta.description ? el('span', { class: 'd', text: meta.description }) : null),
-      el('td', { class: 'v' }, value, el('br'), quality),
-      el('td', {}, write),
+      el('td', { class: 'v' }, value, ' ', forced, el('br'), quality),
+      el('td', { class: 'acts' }, write, force),
     ));
-    rows.set(meta.name, { meta, value, quality });
+    rows.set(meta.name, { meta, value, quality, forced, force });
   }
   const update = (names) => {
     for (const name of names) {
@@ -231,6 +235,8 @@ export function openDetails(ctx, title, tags, subtitle) {
       row.value.className = `live-value ${item.q === 2 ? 'q-bad' : item.q === 1 ? 'q-uncertain' : ''}`;
       setText(row.quality, qualityName(item.q));
       row.quality.className = `qual ${qualityName(item.q)}`;
+      showForced(row.forced, item.f);
+      if (row.force && row.force.liveUpdate) row.force.liveUpdate(item);
     }
   };
   const watch = ctx.live.watch([...rows.keys()], update);

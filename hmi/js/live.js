@@ -11,7 +11,7 @@ export class Live extends EventTarget {
   constructor(url) {
     super();
     this.url = url || `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/api/live`;
-    this.values = new Map();          // name → {v, q, t}
+    this.values = new Map();          // name → {v, q, t, f} (f: forced)
     this.state = 'connecting';        // connecting | live | disconnected
     this.reason = '';
     this.heartbeat = 2.0;
@@ -142,12 +142,14 @@ export class Live extends EventTarget {
       }
       case 'snapshot':
       case 'update': {
-        // {time, values: {name: value}, times: {name: t} (exceptions), quality: {name: code} (not good)}
+        // {time, values: {name: value}, times: {name: t} (exceptions), quality: {name: code} (not good),
+        //  forced: [name, ...] (forced items; the others of the message are not)}
         const changed = [];
         const times = message.times || {};
         const quality = message.quality || {};
+        const forced = new Set(message.forced || []);
         for (const [name, value] of Object.entries(message.values || {})) {
-          this.values.set(name, { v: value, q: quality[name] || 0, t: times[name] ?? message.time });
+          this.values.set(name, { v: value, q: quality[name] || 0, t: times[name] ?? message.time, f: forced.has(name) });
           changed.push(name);
         }
         this._notify(changed);

@@ -1,4 +1,5 @@
-// One tag's details: its declaration, its live value, a write button where the role may write,
+// One tag's details: its declaration, its live value (with the red F while forced), a write button
+// where the role may write, Force… / Unforce… for an engineer (ops/forcing.js),
 // and — when the tag is historized — a small trend of the last hour with a live tail and a link
 // to the trend page. Opened from the tags page, the details of a robot or station, the alarms.
 
@@ -7,6 +8,7 @@ import { formatWithUnit, formatRange, formatTime, qualityName } from './format.j
 import { openWrite } from './dialogs.js';
 import { TrendChart, historized } from './trend_chart.js';
 import { runtimeNow } from './runtime_clock.js';
+import { forcedMark, showForced, forceControls } from './ops/forcing.js';
 
 const LAST_HOUR = 3600;
 
@@ -22,14 +24,17 @@ export function openTagDetails(ctx, meta) {
   const range = formatRange(meta);
   if (range) facts.append(el('dt', { text: 'Range' }), el('dd', { text: `${range}${meta.unit ? ` ${meta.unit}` : ''}` }));
   const trendArea = el('div', { class: 'mini-trend-area' });
+  const forced = forcedMark(meta.forced);
+  const reopen = () => openTagDetails(ctx, meta);
   const write = meta.writable && ctx.session.role !== 'viewer'
-    ? el('button', { type: 'button', class: 'btn small secondary', text: 'Write…', onclick: () => openWrite(ctx, meta) })
+    ? el('button', { type: 'button', class: 'btn small secondary', text: 'Write…', onclick: () => openWrite(ctx, meta).then(reopen) })
     : null;
+  const force = forceControls(ctx, meta, reopen);
   const box = el('dialog', { class: 'dialog drawer tag-details', 'data-tag': meta.name },
     el('div', { class: 'body' },
       el('h2', {}, el('span', { text: meta.name }), el('button', { type: 'button', class: 'close-x', 'aria-label': 'Close', text: '×', onclick: () => box.close() })),
       meta.description ? el('p', { class: 'desc', text: meta.description }) : null,
-      el('div', { class: 'tag-now' }, value, quality, stamp, write),
+      el('div', { class: 'tag-now' }, value, forced, quality, stamp, write, force),
       facts, trendArea));
   document.body.append(box);
 
@@ -40,6 +45,8 @@ export function openTagDetails(ctx, meta) {
     setText(quality, qualityName(code));
     quality.className = `qual ${qualityName(code)}`;
     setText(stamp, formatTime(item ? item.t : meta.timestamp));
+    showForced(forced, item ? item.f : meta.forced);
+    if (force && force.liveUpdate) force.liveUpdate(item);
   };
   const watch = ctx.live.watch([meta.name], paint);
   paint();

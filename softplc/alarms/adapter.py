@@ -121,6 +121,13 @@ class AlarmsAdapter:
             await asyncio.to_thread(self._writer.stop)
             self._writer = None
 
+    def metrics(self) -> dict[str, Any]:
+        """Figures for /metrics (softplc/metrics/catalog.py): alarms active, unacknowledged, shelved."""
+        engine = self.engine
+        if engine is None:
+            return {}
+        return {"active": engine.active_count, "unacknowledged": engine.unacknowledged_count, "shelved": engine.shelved_count}
+
     def describe(self) -> str:
         count = len(self.engine.alarms) if self.engine is not None else len(self.settings.definitions)
         where = self.storage.describe() if self.storage is not None else "the state directory"

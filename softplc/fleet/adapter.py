@@ -232,6 +232,18 @@ class FleetAdapter:
             unsubscribe()
         self._cleanup.clear()
 
+    def metrics(self) -> dict[str, Any]:
+        """Figures for /metrics (softplc/metrics/catalog.py): robots by navigation state (offline: no good value)."""
+        if self._runtime is None:
+            return {}
+        db = self._runtime.db
+        states: dict[str, int] = {}
+        for robot in self.robots:
+            tag = db.get(f"{robot.id}_navstate")
+            state = "offline" if tag is None or tag.quality is not Quality.GOOD else str(tag.value)
+            states[state] = states.get(state, 0) + 1
+        return {"robots": states}
+
     def describe(self) -> str:
         remote = len([r for r in self.robots if r.driver is DriverKind.REMOTE])
         width, height = self.floor.grid.size_m

@@ -181,6 +181,15 @@ class HistoryRecorder:
         period = self.storage.flush_period if self.storage else 0.0
         return f"history: recording {len(self.filters)} tags to {where}{sim}, flushed every {period:g} s"
 
+    def metrics(self) -> dict[str, Any]:
+        """Figures for /metrics (softplc/metrics/catalog.py): rows written, the queue's depth, drops, failed commits."""
+        writer = self.writer
+        if writer is None:
+            return {}
+        stats = writer.stats
+        return {"tags": len(self.filters), "rows_written": stats.rows_written, "queue": stats.pending,
+                "rows_dropped": stats.dropped, "errors": stats.errors}
+
     def flush(self, timeout: float = 30.0) -> bool:
         """Commit what was recorded so far (blocking: tests, the export of a running plant)."""
         return self.writer.flush(timeout) if self.writer is not None else False

@@ -82,6 +82,7 @@ def tag_json(tag: Tag, writable: bool) -> dict[str, Any]:
         "writable": writable,
         "value": wire_value(tag.value),
         "quality": tag.quality.value,
+        "forced": tag.forced,
         "timestamp": round(tag.timestamp, 3),
     }
 

@@ -2,8 +2,10 @@
 
     GET  /api/commands           the commands, each with its arguments and whether the session's role may call it
     POST /api/commands/NAME      JSON object of arguments → {"ok": true, "command", "result", "time"}
-                                 or {"ok": false, "command", "error"}: 403 refused for the role (or no
-                                 login / CSRF token), 404 no such command, 400 any other refusal
+                                 or {"ok": false, "command", "error"[, "details"]}: 403 refused for the
+                                 role (or no login / CSRF token), 404 no such command, 400 a body that
+                                 is not a JSON object, 422 any other refusal, in the runtime's words (an
+                                 online change's refusal adds `details`: differences, located problems)
 
 Every call goes through `runtime.commands.call` with `Origin("hmi", user, peer, role)`: the
 registry checks the role and reports the call (the audit trail), exactly as for OPC UA and the
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
@@ -23,6 +26,7 @@ from aiohttp import web
 from softplc.commands import CommandRefused, Permission, UnknownCommand
 from softplc.hmi.wire import json_response
 from softplc.peers import PeerLog, peer_host
+from softplc.suggest import did_you_mean
 from softplc.tagdb import Origin
 
 if TYPE_CHECKING:
@@ -80,11 +84,17 @@ class CommandDoor:
         try:
             result = await commands.call(name, arguments, origin)
         except UnknownCommand as refused:
-            return json_response({"ok": False, "command": name, "error": str(refused)}, status=404)
+            error = f"{refused}{did_you_mean(name, commands.names())}"
+            return json_response({"ok": False, "command": name, "error": error}, status=404)
         except CommandRefused as refused:
+            # The registry refuses a role before anything else: the same question decides the status.
             by_role = command is not None and not command.permission.allows(identity.role)
             self._note(origin, name, command, False, str(refused))
-            return json_response({"ok": False, "command": name, "error": str(refused)}, status=403 if by_role else 400)
+            answer: dict[str, Any] = {"ok": False, "command": name, "error": str(refused)}
+            details = getattr(refused, "details", None)
+            if isinstance(details, Mapping):
+                answer["details"] = dict(details)
+            return json_response(answer, status=403 if by_role else 422)
         except Exception as error:  # a broken handler: the caller gets JSON, the log the traceback
             log.exception("HMI: command %s failed", name)
             return json_response({"ok": False, "command": name, "error": f"{name} failed: {error}"}, status=500)

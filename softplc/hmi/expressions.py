@@ -25,6 +25,7 @@ class Item:
     """An expression's current value, with a quality and timestamp like a tag's."""
 
     __slots__ = ("name", "value", "quality", "timestamp")
+    forced = False  # an expression is never forced itself (its tags may be)
 
     def __init__(self, name: str, value: Any, quality: Quality, timestamp: float) -> None:
         self.name = name

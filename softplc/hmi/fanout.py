@@ -8,9 +8,11 @@
   behind longer than `drop_after` is dropped (it reconnects by itself and re-synchronises).
 
 Wire format: `{"type": "update", "time": T, "values": {name: value}, "times": {name: t},
-"quality": {name: code}}` — `time` is the timestamp (epoch seconds; simulated under --sim) of
-the items not listed in `times` (a scan commits its outputs with one timestamp, so `times` is
-mostly absent), and `quality` lists only the items that are not good (1 uncertain, 2 bad).
+"quality": {name: code}, "forced": [name, ...]}` — `time` is the timestamp (epoch seconds;
+simulated under --sim) of the items not listed in `times` (a scan commits its outputs with one
+timestamp, so `times` is mostly absent), `quality` lists only the items that are not good (1
+uncertain, 2 bad), and `forced` the items that are forced (softplc/forcing.py: quality good, but
+pinned by an engineer); an item of the message not listed there is not forced.
 Encoding a timestamp and a quality per item would double the cost of an update. Non-finite
 floats travel as the strings "NaN", "Infinity", "-Infinity" (JSON has no such numbers).
 """
@@ -67,6 +69,7 @@ class Encoder:
         values: dict[str, Any] = {}
         times: dict[str, float] = {}
         qualities: dict[str, int] = {}
+        forced: list[str] = []
         base: float | None = None
         for name in names:
             item = lookup(name)
@@ -83,11 +86,15 @@ class Encoder:
                 times[name] = round(stamp, 3)
             if item.quality is not good:
                 qualities[name] = codes[item.quality]
+            if item.forced:
+                forced.append(name)
         message: dict[str, Any] = {"type": kind, "time": round(base or 0.0, 3), "values": values}
         if times:
             message["times"] = times
         if qualities:
             message["quality"] = qualities
+        if forced:
+            message["forced"] = forced
         if last:
             message["done"] = True
         encoded = json.dumps(message, separators=(",", ":"), ensure_ascii=False).encode()

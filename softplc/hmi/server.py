@@ -27,6 +27,7 @@ from softplc.hmi.journal_export import JournalExport
 from softplc.hmi.assets import AssetsNotFound, find_assets
 from softplc.hmi.expressions import ExpressionTable
 from softplc.hmi.live import Hub
+from softplc.hmi.operations import install_operations
 from softplc.hmi.plant import PlantModel
 from softplc.hmi.security import OriginPolicy, middleware
 from softplc.hmi.sessions import Sessions
@@ -61,6 +62,7 @@ class HmiServer:
         self.settings = settings or HmiSettings.from_config(config)
         self.views: dict[str, View] = {view.name: view for view in load_views(config)[0]}
         self.shell = Shell()
+        install_operations(self)  # forcing, program control, online change, the audit page (operations.py)
         self.url = ""
         self.port: int | None = None
         self.assets: Path | None = None
@@ -134,6 +136,14 @@ class HmiServer:
             await self._runner.cleanup()
             self._runner = None
             self.sessions.close()
+
+    def metrics(self) -> dict[str, Any]:
+        """Figures for /metrics (softplc/metrics/catalog.py): live clients, sessions, drops, messages encoded."""
+        if self._runner is None:
+            return {}
+        hub = self.hub
+        return {"clients": len(hub.clients), "sessions": len(self.sessions), "clients_dropped": hub.dropped,
+                "updates_encoded": hub.encoder.messages}
 
     def describe(self) -> str:
         settings = self.settings

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from softplc.durations import parse_duration
+from softplc.metrics.settings import METRICS_SCHEMA, metrics_problems
 from softplc.roles import Role
 
 if TYPE_CHECKING:
@@ -58,6 +59,7 @@ HMI_SERVER: dict[str, Any] = {
             "items": {"type": "string"},
             "description": "Other origins allowed to open the live channel and write, e.g. https://scada.example.com behind a reverse proxy.",
         },
+        "metrics": METRICS_SCHEMA,  # /metrics on this server (softplc/metrics/settings.py)
     },
     "additionalProperties": False,
 }
@@ -284,7 +286,7 @@ def settings_problems(config: PlantConfig) -> list[Problem]:
     for index, origin in enumerate(section.get("allowed_origins") or ()):
         if isinstance(origin, str) and not origin.startswith(("http://", "https://")):
             problems.append(problem(("allowed_origins", index), f"an origin looks like https://host[:port], not {origin!r}"))
-    return problems
+    return [*problems, *metrics_problems(config)]
 
 
 def _seconds(value: Any, default: float) -> float:

@@ -25,6 +25,7 @@ import asyncio
 import logging
 import socket
 import struct
+from collections import Counter
 from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any
@@ -200,6 +201,7 @@ class _Connection(ServerRequestHandler):
             log.exception("Modbus TCP: request from %s (function %d) failed", self.peer, request.function_code)
             response = ExceptionResponse(request.function_code, ExcCodes.DEVICE_FAILURE)
         response.transaction_id, response.dev_id = frame.transaction_id, frame.unit_id
+        self._plc_server.requests[request.function_code, "exception" if isinstance(response, ExceptionResponse) else "ok"] += 1
         if self.transport is not None:  # the client may have gone while the request ran
             self.transport.write(self.framer.buildFrame(response))  # type: ignore[attr-defined]
 
@@ -259,6 +261,7 @@ class PlcTcpServer(ModbusTcpServer):
         self.frame_timeout = frame_timeout
         self.peer_log = PeerLog(log, service="Modbus TCP")
         self.framing_errors = 0
+        self.requests: Counter[tuple[int, str]] = Counter()  # (function code, "ok" | "exception") → answered (/metrics)
         self.refusal_report = EventReport(
             logging.WARNING,
             f"Modbus TCP: refused a connection from %s: max_connections ({max_connections}) are open",

@@ -128,6 +128,19 @@ class ModbusAdapter:
             return ConnectionCounts(0, 0, 0, 0)
         return self._server.counts
 
+    def metrics(self) -> dict[str, Any]:
+        """Figures for /metrics (softplc/metrics/catalog.py): connections and requests."""
+        server = self._server
+        if server is None:
+            return {}
+        counts = server.counts
+        return {
+            "connections": counts.open,
+            "connections_refused": counts.refused,
+            "connections_closed": {"idle": counts.closed_idle, "framing": counts.closed_framing},
+            "requests": {(str(function), result): count for (function, result), count in server.requests.items()},
+        }
+
     def describe(self) -> str:
         counts = ", ".join(f"{sum(m.words for m in self.map.in_table(t))} {t.plural}" for t in Table)
         where = f"{self.settings.host}:{self.port if self.port is not None else self.settings.port}"

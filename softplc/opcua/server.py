@@ -24,7 +24,7 @@ import gc
 import logging
 import time
 from datetime import datetime, timezone
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlparse
 
 from asyncua import Server, ua
@@ -193,6 +193,18 @@ class OpcUaServer:
                 self.user_manager.close()
             # Let the collector have the stopped server's nodes back (a pause no longer matters).
             gc.unfreeze()
+
+    def metrics(self) -> dict[str, Any]:
+        """Figures for /metrics (softplc/metrics/catalog.py): sessions, subscriptions, monitored items."""
+        if self.server is None:
+            return {}
+        iserver = self.server.iserver
+        subscriptions = list(iserver.subscription_service.subscriptions.values())
+        return {
+            "sessions": len(iserver._external_sessions),  # asyncua keeps the activated sessions here, no public count
+            "subscriptions": len(subscriptions),
+            "monitored_items": sum(len(subscription.monitored_item_srv._monitored_items) for subscription in subscriptions),
+        }
 
     def describe(self) -> str:
         settings = self.settings

@@ -4,16 +4,19 @@
 import { el, setText } from '../dom.js';
 import { formatNumber, formatWithUnit, NAVSTATE_CLASS, CURRLOC_TEXT } from '../format.js';
 import { taskColor, robotColor } from './floor.js';
+import { forcedMark, showForced, anyForced } from '../ops/forcing.js';
 
 function level(label, kind) {
   const fill = el('div', { class: `fill ${kind}` });
   const text = el('span', { class: 'num live-value' });
-  return { node: el('div', { class: 'level' }, el('div', { class: 'label' }, el('span', { text: label }), text), el('div', { class: 'track' }, fill)), fill, text };
+  const mark = forcedMark(false);
+  return { node: el('div', { class: 'level' }, el('div', { class: 'label' }, el('span', {}, label, ' ', mark), text), el('div', { class: 'track' }, fill)), fill, text, mark };
 }
 
 function figure(label) {
   const value = el('b', { class: 'num live-value', text: '—' });
-  return { node: el('div', {}, el('span', { class: 'muted', text: label }), value), value };
+  const mark = forcedMark(false);
+  return { node: el('div', {}, el('span', { class: 'muted' }, label, ' ', mark), value), value, mark };
 }
 
 export class TaskCards {
@@ -61,6 +64,11 @@ export class TaskCards {
       setText(card.rate.value, tags.iFr ? `${formatNumber(value(tags.iFr) ?? NaN, 1)}/min` : '—');
       setText(card.weight.value, tags.Tw && typeof value(tags.Tw) === 'number' ? formatNumber(value(tags.Tw), 2) : '—');
       setText(card.goals.value, tags.goals && value(tags.goals) !== undefined ? String(value(tags.goals)) : '—');
+      showForced(card.input.mark, anyForced(this.live, [tags.iBM, tags.iBL, tags.iBC]));
+      showForced(card.output.mark, anyForced(this.live, [tags.qSM, tags.qSL, tags.qSC]));
+      showForced(card.rate.mark, anyForced(this.live, [tags.iFr]));
+      showForced(card.weight.mark, anyForced(this.live, [tags.Tw]));
+      showForced(card.goals.mark, anyForced(this.live, [tags.goals]));
       const inLevel = value(tags.iBL);
       if (typeof inLevel === 'number' && (!fullest || inLevel > fullest.level)) fullest = { card, level: inLevel };
       const tw = value(tags.Tw);
@@ -109,11 +117,12 @@ export class RobotList {
       const line2 = el('div', { class: 'line2' });
       const swatch = el('span', { class: 'swatch', text: robot.id.replace(/^[a-z]+/i, '') || robot.id });
       swatch.style.background = robotColor(index);
+      const mark = forcedMark(false);
       const node = el('div', { class: 'robot-card', 'data-robot': robot.id, tabindex: 0, role: 'button', 'aria-label': `Robot ${robot.id}: details` },
-        swatch, el('strong', { text: `${robot.id} · ${robot.name}` }), state, line2);
+        swatch, el('strong', {}, `${robot.id} · ${robot.name} `, mark), state, line2);
       node.addEventListener('click', () => onOpen(robot));
       node.addEventListener('keydown', (event) => { if (event.key === 'Enter') onOpen(robot); });
-      return { robot, node, state, line2 };
+      return { robot, node, state, line2, mark };
     });
     this.node = el('div', { class: 'robot-list' }, ...this.rows.map((row) => row.node));
   }
@@ -143,6 +152,7 @@ export class RobotList {
       const reason = value(tags.navreason);
       if (reason && (navstate === 'blocked' || navstate === 'failed')) parts.push(reason);
       setText(row.line2, parts.join(' · '));
+      showForced(row.mark, anyForced(this.live, Object.values(tags)));
     }
   }
 }

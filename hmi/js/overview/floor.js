@@ -2,6 +2,7 @@
 // at its pose with heading, route, goal, navigation state and current task, moving smoothly.
 
 import { svg, setText } from '../dom.js';
+import { anyForced } from '../ops/forcing.js';
 import { formatNumber } from '../format.js';
 
 export const SCALE = 40;  // SVG units per metre: a 22 m floor is ~880 units, about its size on screen
@@ -86,8 +87,9 @@ export class Floor {
     const box = svg('rect', { class: 'station-box', x: -16, y: -16, width: 32, height: 32, rx: 5, fill: color, stroke: '#fff' });
     const label = svg('text', { class: 'station-label', x: 0, y: 5, 'text-anchor': 'middle', text: kind === 'in' ? 'IN' : 'OUT' });
     const name = svg('text', { class: 'bar-text', x: 0, y: -22, 'text-anchor': 'middle', text: short });
+    const forced = forcedBadge(-7, -54);  // above the station's name, clear of its box and bar
     const node = svg('g', { class: 'station', 'data-task': task.id, 'data-kind': kind, tabindex: 0, role: 'button',
-      'aria-label': `${task.name} ${kind === 'in' ? 'input buffer' : 'output storage'}` }, box, label, name);
+      'aria-label': `${task.name} ${kind === 'in' ? 'input buffer' : 'output storage'}` }, box, label, name, forced);
     let bar = null;
     if (task.tags[levelField] || task.tags[itemsField]) {
       const track = svg('rect', { class: 'bar-track', x: 24, y: -36, width: 18, height: 72, rx: 3 });
@@ -101,7 +103,7 @@ export class Floor {
     }
     node.addEventListener('click', () => this.handlers.task(task));
     node.addEventListener('keydown', (event) => { if (event.key === 'Enter') this.handlers.task(task); });
-    return { node, bar, kind, fallback, xField, yField, itemsField, levelField, capacityField, task };
+    return { node, bar, kind, fallback, xField, yField, itemsField, levelField, capacityField, task, forced };
   }
 
   _robot(robot, color) {
@@ -114,13 +116,14 @@ export class Floor {
     const taskBox = svg('rect', { x: radius + 2, y: 2, width: 30, height: 17, rx: 4, fill: '#56627a' });
     const taskText = svg('text', { class: 'robot-task', x: radius + 17, y: 14.5, 'text-anchor': 'middle', text: '' });
     const badge = svg('g', { class: 'task-badge', visibility: 'hidden' }, taskBox, taskText);
+    const forced = forcedBadge(-radius - 16, -radius - 20);
     const node = svg('g', { class: 'robot', 'data-robot': robot.id, tabindex: 0, role: 'button', 'aria-label': `Robot ${robot.id}, ${robot.name}` },
-      ring, body, heading, label, badge);
+      ring, body, heading, label, badge, forced);
     node.addEventListener('click', () => this.handlers.robot(robot));
     node.addEventListener('keydown', (event) => { if (event.key === 'Enter') this.handlers.robot(robot); });
     const route = svg('polyline', { class: 'route', stroke: color, points: '' });
     const goal = svg('path', { class: 'goal', stroke: color, d: '', visibility: 'hidden' });
-    return { robot, node, ring, heading, badge, taskBox, taskText, route, goal, target: null, shown: null };
+    return { robot, node, ring, heading, badge, taskBox, taskText, route, goal, forced, target: null, shown: null };
   }
 
   /** Apply changed values (names from the live channel). */
@@ -160,6 +163,7 @@ export class Floor {
       } else {
         marker.badge.setAttribute('visibility', 'hidden');
       }
+      marker.forced.setAttribute('visibility', anyForced(live, Object.values(tags)) ? 'visible' : 'hidden');
       const route = value(tags.route);
       marker.route.setAttribute('points', typeof route === 'string' ? this._points(route) : '');
       const gx = value(tags.xgoal), gy = value(tags.ygoal);
@@ -208,6 +212,8 @@ export class Floor {
     if (typeof items === 'number') setText(station.bar.count, typeof capacity === 'number' ? `${items}/${capacity}` : String(items));
     const rate = station.kind === 'in' ? value(tags.iFr) : undefined;  // items arriving per minute
     if (typeof rate === 'number') setText(station.bar.rate, `+${formatNumber(rate, rate % 1 ? 1 : 0)}/min`);
+    const shown = [station.itemsField, station.levelField, station.capacityField, station.xField, station.yField, station.kind === 'in' ? 'iFr' : null];
+    station.forced.setAttribute('visibility', anyForced(this.live, shown.map((field) => field && tags[field])) ? 'visible' : 'hidden');
     const quality = this.live.get(tags[station.levelField] || tags[station.itemsField]);
     station.node.classList.toggle('q-bad', Boolean(quality && quality.q === 2));
   }
@@ -258,6 +264,12 @@ export class Floor {
     if (this._frame !== null) cancelAnimationFrame(this._frame);
     this._frame = null;
   }
+}
+
+/** A red "F" in a box at (x, y) of its group: shown while a tag the group draws is forced. */
+function forcedBadge(x, y) {
+  return svg('g', { class: 'forced-badge', visibility: 'hidden', transform: `translate(${x} ${y})` },
+    svg('rect', { width: 14, height: 15, rx: 3 }), svg('text', { x: 7, y: 11.5, 'text-anchor': 'middle', text: 'F' }));
 }
 
 function boundsOf(fleet) {

@@ -5,6 +5,7 @@
 import { el, clear, setText } from '../dom.js';
 import { allTagMeta } from '../api.js';
 import { formatValue, formatTime, formatRange, qualityName, qualityClass } from '../format.js';
+import { forcedMark, showForced } from '../ops/forcing.js';
 
 const OVERSCAN = 8;
 
@@ -35,7 +36,8 @@ export async function mount(root, ctx) {
   let visible = [];
 
   const makeRow = () => {
-    const name = el('span', { class: 'n' });
+    const name = el('span', { class: 'n', role: 'button', tabindex: 0, title: 'details' });
+    const forced = forcedMark(false);
     const description = el('span', { class: 'd' });
     const value = el('span', { class: 'live-value' });
     const unit = el('span', { class: 'u' });
@@ -48,9 +50,9 @@ export async function mount(root, ctx) {
     const nameCell = el('span', { class: 'name', role: 'button', tabindex: 0, title: 'Details and trend',
       onclick: () => row.tag && openTag(row.tag), onkeydown: (event) => { if (event.key === 'Enter' && row.tag) openTag(row.tag); } }, name, description);
     const node = el('div', { class: 'vrow', role: 'row' },
-      nameCell, el('span', { class: 'val' }, value, unit),
+      nameCell, el('span', { class: 'val' }, forced, value, unit),
       el('span', { class: 'qcol' }, quality), time, range, access, action);
-    const row = { node, name, description, value, unit, quality, time, range, access, action, tag: null };
+    const row = { node, name, description, value, unit, quality, time, range, access, action, forced, tag: null };
     body.append(node);
     return row;
   };
@@ -107,6 +109,7 @@ export async function mount(root, ctx) {
       setText(row.quality, qualityName(quality));
       row.quality.className = `qual ${qualityName(quality)}`;
       setText(row.time, formatTime(item ? item.t : row.tag.timestamp));
+      showForced(row.forced, item ? item.f : row.tag.forced);
     }
   }
 

@@ -1,9 +1,11 @@
 // Tasks and programs: the runtime state, each task's live scan statistics, each program's state
-// and last error, and the reset commands for the roles allowed to send them.
+// and last error, and the reset commands for the roles allowed to send them; program control and
+// online change for engineers (ops/programs.js).
 
 import { el, setText } from '../dom.js';
 import { get, tagMeta } from '../api.js';
 import { formatNumber } from '../format.js';
+import { decoratePrograms } from '../ops/programs.js';
 
 const SERIES = [['scan', 'scan time'], ['cycle', 'cycle time'], ['latency', 'start latency']];
 const STATS = ['min', 'mean', 'p99', 'max'];
@@ -93,6 +95,7 @@ export async function mount(root, ctx) {
   };
   const watch = ctx.live.watch([...cells.keys()], update);
   update([...cells.keys()]);
+  const undecorate = await decoratePrograms(root, ctx, model);  // start / stop / restart, online change (engineers)
   root.dataset.ready = '1';
-  return () => watch.close();
+  return () => { watch.close(); undecorate(); };
 }

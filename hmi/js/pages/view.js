@@ -1,7 +1,8 @@
 // A user mimic: the engineer's SVG with its elements bound to tags (hmi: views: in tagdb.yaml).
 // Expressions are evaluated on the server; the page only shows values (docs/hmi.md, "Views").
 
-import { el, setText } from '../dom.js';
+import { el, svg, setText } from '../dom.js';
+import { anyForced } from '../ops/forcing.js';
 import { get, tagMeta } from '../api.js';
 import { parseSvg } from '../svg.js';
 import { formatValue } from '../format.js';
@@ -45,6 +46,25 @@ export async function mount(root, ctx) {
       byItem.get(item).push(binding);
     }
   }
+
+  // A red "F" on every element drawn from a forced tag (expressions are never forced themselves).
+  const ofElement = new Map();  // element → its bindings
+  for (const binding of view.bindings) {
+    if (!binding.element || binding.kind === 'click') continue;
+    if (!ofElement.has(binding.element)) ofElement.set(binding.element, []);
+    ofElement.get(binding.element).push(binding);
+  }
+  const badges = new Map();  // element → its badge (made when it is first forced)
+  const markForced = (element) => {
+    const items = (ofElement.get(element) || []).flatMap((binding) => [binding.source, binding.x, binding.y]);
+    const forced = anyForced(ctx.live, items.filter((item) => item && !item.startsWith('=')));
+    let badge = badges.get(element);
+    if (!badge && !forced) return;
+    if (!badge) badges.set(element, (badge = forcedBadge(element)));
+    badge.setAttribute('visibility', forced ? 'visible' : 'hidden');
+    if (badge.parentNode !== element) badge.setAttribute('transform', element.getAttribute('transform') || '');  // follows a moving element
+    element.classList.toggle('hmi-forced', forced);
+  };
 
   const live = ctx.live;
   const value = (item) => { const entry = item ? live.get(item) : undefined; return entry ? entry.v : undefined; };
@@ -102,6 +122,7 @@ export async function mount(root, ctx) {
       default:
         break;
     }
+    markForced(element);
     if (quality !== (binding.quality || 0)) {  // most updates keep the quality: touch classes only on a change
       binding.quality = quality;
       element.classList.toggle('hmi-q-uncertain', quality === 1);
@@ -126,6 +147,20 @@ export async function mount(root, ctx) {
   if (ctx.live.synced) ready();
   ctx.live.addEventListener('synced', ready);
   return () => { watch.close(); ctx.live.removeEventListener('synced', ready); };
+}
+
+function forcedBadge(element) {
+  let box = { x: 0, y: 0, width: 0 };
+  try { box = element.getBBox(); } catch { /* not rendered (hidden): at its origin */ }
+  const mark = svg('g', { class: 'forced-badge', 'data-forced-for': element.id, transform: `translate(${(box.x + box.width - 7).toFixed(1)} ${(box.y - 8).toFixed(1)})` },
+    svg('rect', { width: 14, height: 15, rx: 3 }), svg('text', { x: 7, y: 11.5, 'text-anchor': 'middle', text: 'F' }));
+  if (element.localName === 'g') {
+    element.append(mark);
+    return mark;
+  }
+  const holder = svg('g', { class: 'forced-holder' }, mark);  // beside the element, in its coordinates
+  element.after(holder);
+  return holder;
 }
 
 function findById(drawing, id) {

@@ -1,0 +1,228 @@
+// Forcing from the HMI (engineers): force, unforce, unforce and restore — each after a confirmation
+// that shows the change as "old → new unit" — and the red "F" every forced value carries.
+//
+// The semantics are the runtime's (softplc/forcing.py, CODESYS-like): programs read the forced
+// value, their writes and every client's writes do not reach the tag until it is unforced.
+// The commands are tags.force / tags.unforce / tags.forces (commands.js); refusals show inline.
+
+import { el, clear, setText } from '../dom.js';
+import { formatValue, formatWithUnit, formatRange, formatTime, qualityName } from '../format.js';
+import { command, isEngineer } from './commands.js';
+
+/** The red "F" of a forced value (hidden while not forced). */
+export function forcedMark(forced) {
+  return el('span', { class: 'forced-mark', title: 'forced by an engineer: programs and clients cannot change it', text: 'F', hidden: !forced });
+}
+
+/** Show or hide a mark made by forcedMark(). */
+export function showForced(mark, forced) {
+  if (mark.hidden === Boolean(forced)) mark.hidden = !forced;
+}
+
+/** Whether any of the named items is forced now. */
+export function anyForced(live, names) {
+  for (const name of names) {
+    const item = name ? live.get(name) : undefined;
+    if (item && item.f) return true;
+  }
+  return false;
+}
+
+/** The forces in effect: [{tag, value, since, by, previous}] (any role may list them). */
+export async function listForces() {
+  const answer = await command('tags.forces', {});
+  if (!answer.ok) throw new Error(answer.error);
+  return answer.result;
+}
+
+function show(node) {
+  for (const open of document.querySelectorAll('dialog.dialog[open]')) open.close();
+  const box = el('dialog', { class: 'dialog force-dialog' }, node);
+  document.body.append(box);
+  box.addEventListener('close', () => box.remove(), { once: true });
+  box.showModal();
+  return box;
+}
+
+function heading(text, onClose) {
+  return el('h2', {}, el('span', { text }), el('button', { type: 'button', class: 'close-x', 'aria-label': 'Close', text: '×', onclick: onClose }));
+}
+
+function valueText(value, unit) {
+  const text = typeof value === 'number' ? String(value) : formatValue(value);
+  return unit ? `${text} ${unit}` : text;
+}
+
+/** The controls a tag's details row gets: Force… for an engineer, Unforce… while it is forced. */
+export function forceControls(ctx, meta, reopen) {
+  if (!isEngineer(ctx.session) || meta.access === undefined || meta.name.startsWith('_sys.')) return null;
+  const force = el('button', { type: 'button', class: 'btn small danger', text: 'Force…', 'data-force': meta.name,
+    onclick: () => openForce(ctx, meta).then(reopen) });
+  const unforce = el('button', { type: 'button', class: 'btn small secondary', text: 'Unforce…', 'data-unforce': meta.name, hidden: true,
+    onclick: () => openUnforce(ctx, meta).then(reopen) });
+  const node = el('span', { class: 'force-controls' }, force, unforce);
+  node.liveUpdate = (item) => {
+    const forced = Boolean(item && item.f);
+    unforce.hidden = !forced;
+    force.textContent = forced ? 'Force again…' : 'Force…';
+  };
+  node.liveUpdate(ctx.live.get(meta.name));
+  return node;
+}
+
+/** Force a tag after a confirmation; resolves true when the runtime accepted the force. */
+export function openForce(ctx, meta) {
+  return new Promise((resolve) => {
+    let accepted = false;
+    let box = null;
+    const finish = () => { if (box) box.close(); };
+    const unit = meta.unit || '';
+    const current = () => ctx.live.get(meta.name);
+    const now = el('span', { class: 'live-value num' });
+    const mark = forcedMark(false);
+    const showNow = () => {
+      const item = current();
+      setText(now, item ? `${formatWithUnit(item.v, unit)} (${qualityName(item.q)})` : formatWithUnit(meta.value, unit));
+      showForced(mark, item && item.f);
+    };
+    const watch = ctx.live.watch([meta.name], showNow);
+    showNow();
+
+    let input;
+    const entry = el('div');
+    if (meta.type === 'bool') {
+      const value = current() ? current().v : meta.value;
+      const make = (choice) => el('label', {}, el('input', { type: 'radio', name: 'value', value: String(choice), checked: choice === !value }), choice ? 'true' : 'false');
+      input = el('div', { class: 'choices', role: 'radiogroup', 'aria-label': 'Forced value' }, make(true), make(false));
+      entry.append(el('label', { text: 'Force to' }), input);
+    } else {
+      input = el('input', { type: 'text', name: 'value', autocomplete: 'off', id: 'force-value', inputmode: meta.type === 'string' ? 'text' : 'decimal' });
+      const value = current() ? current().v : meta.value;
+      input.value = value === undefined || value === null ? '' : String(value);
+      entry.append(el('label', { for: 'force-value', text: `Force to${unit ? ` (${unit})` : ''}` }), input);
+    }
+    // Typed JSON for a bool; the text otherwise, parsed by the runtime by the tag's type (as `softplc force` does).
+    const readValue = () => {
+      if (meta.type === 'bool') {
+        const checked = input.querySelector('input:checked');
+        return checked ? checked.value === 'true' : null;
+      }
+      return meta.type === 'string' ? input.value : input.value.trim();
+    };
+
+    const facts = el('dl', { class: 'kv small' }, el('dt', { text: 'Now' }), el('dd', {}, now, ' ', mark), el('dt', { text: 'Type' }), el('dd', { text: meta.type }));
+    const range = formatRange(meta);
+    if (range) facts.append(el('dt', { text: 'Range' }), el('dd', { text: `${range}${unit ? ` ${unit}` : ''}` }));
+    const message = el('div', { role: 'alert' });
+    const stepValue = el('div', {}, entry);
+    const change = el('div', { class: 'change num' });
+    const stepConfirm = el('div', { hidden: true }, el('p', { class: 'muted small', text: 'Please confirm the force:' }), change);
+    const back = el('button', { type: 'button', class: 'btn secondary', text: 'Back', hidden: true });
+    const next = el('button', { type: 'submit', class: 'btn danger', text: 'Review' });
+    const cancel = el('button', { type: 'button', class: 'btn secondary', text: 'Cancel', onclick: finish });
+    let pending = null;
+    const toConfirm = (value) => {
+      pending = value;
+      const old = current() ? current().v : meta.value;
+      change.replaceChildren(el('span', { class: 'old', text: formatWithUnit(old, unit) }), el('span', { class: 'arrow', text: '→' }),
+        el('strong', { class: 'new', text: valueText(value, unit) }), ' ', forcedMark(true));
+      clear(message);
+      stepValue.hidden = true;
+      stepConfirm.hidden = false;
+      back.hidden = false;
+      next.textContent = 'Confirm force';
+      next.dataset.step = 'confirm';
+      next.focus();
+    };
+    const toValue = () => {
+      stepValue.hidden = false; stepConfirm.hidden = true; back.hidden = true;
+      next.textContent = 'Review'; next.dataset.step = 'value';
+    };
+    back.addEventListener('click', toValue);
+
+    const form = el('form', { method: 'dialog', novalidate: true });
+    form.addEventListener('submit', async (event) => {
+      event.preventDefault();
+      if (next.dataset.step !== 'confirm') {
+        const value = readValue();
+        if (value === null || value === '') return;
+        toConfirm(value);
+        return;
+      }
+      next.disabled = true;
+      clear(message);
+      const answer = await command('tags.force', { tag: meta.name, value: pending });
+      next.disabled = false;
+      if (answer.ok) {
+        accepted = true;
+        message.append(el('div', { class: 'done', text: `Forced: ${answer.result}.` }));
+        next.hidden = true; back.hidden = true; cancel.textContent = 'Close';
+      } else {
+        message.append(el('div', { class: 'refusal', 'data-status': answer.status, text: `Refused — ${answer.error}` }));
+        toValue();
+      }
+    });
+    form.append(
+      heading(`Force ${meta.name}`, finish),
+      meta.description ? el('p', { class: 'desc', text: meta.description }) : null,
+      el('p', { class: 'warning small', text: 'Forcing pins the value: programs read it, and neither they nor any client can change it until it is unforced. Everyone sees it marked F.' }),
+      facts, stepValue, stepConfirm, message,
+      el('div', { class: 'actions' }, cancel, back, next),
+    );
+    box = show(form);
+    box.addEventListener('close', () => { watch.close(); resolve(accepted); }, { once: true });
+    (meta.type === 'bool' ? input.querySelector('input') : input).focus();
+  });
+}
+
+/** Unforce a tag (or unforce and restore it) after a confirmation; resolves true when done. */
+export function openUnforce(ctx, meta, force) {
+  return new Promise((resolve) => {
+    let done = false;
+    let box = null;
+    const finish = () => { if (box) box.close(); };
+    const unit = meta.unit || '';
+    const message = el('div', { role: 'alert' });
+    const about = el('p', { class: 'muted small', text: 'Looking up the force…' });
+    const keep = el('div', { class: 'change num' });
+    const restore = el('div', { class: 'change num' });
+    const choices = el('div', { class: 'unforce-choices' },
+      el('label', {}, el('input', { type: 'radio', name: 'how', value: 'keep', checked: true }), ' Unforce: the tag keeps its value until its owner writes it again'), keep,
+      el('label', {}, el('input', { type: 'radio', name: 'how', value: 'restore' }), ' Unforce and restore the value it had before the force'), restore);
+    const confirm = el('button', { type: 'submit', class: 'btn', text: 'Confirm unforce', disabled: true });
+    const cancel = el('button', { type: 'button', class: 'btn secondary', text: 'Cancel', onclick: finish });
+    const form = el('form', { method: 'dialog', novalidate: true },
+      heading(`Unforce ${meta.name}`, finish), about, choices, message, el('div', { class: 'actions' }, cancel, confirm));
+    const restoring = () => form.querySelector('input[name=how]:checked').value === 'restore';
+    choices.addEventListener('change', () => { confirm.textContent = restoring() ? 'Confirm unforce and restore' : 'Confirm unforce'; });
+    form.addEventListener('submit', async (event) => {
+      event.preventDefault();
+      confirm.disabled = true;
+      clear(message);
+      const answer = await command('tags.unforce', { tag: meta.name, restore: restoring() });
+      if (answer.ok) {
+        done = true;
+        message.append(el('div', { class: 'done', text: `${answer.result}.` }));
+        confirm.hidden = true; cancel.textContent = 'Close';
+      } else {
+        message.append(el('div', { class: 'refusal', 'data-status': answer.status, text: `Refused — ${answer.error}` }));
+        confirm.disabled = false;
+      }
+    });
+    box = show(form);
+    box.addEventListener('close', () => resolve(done), { once: true });
+    const describe = (entry) => {
+      if (!entry) {
+        setText(about, `${meta.name} is not forced now.`);
+        return;
+      }
+      setText(about, `Forced to ${valueText(entry.value, unit)} since ${formatTime(entry.since)} by ${entry.by}.`);
+      keep.replaceChildren(el('span', { class: 'old', text: valueText(entry.value, unit) }), el('span', { class: 'arrow', text: '→' }), el('strong', { class: 'new', text: `${valueText(entry.value, unit)}, not forced` }));
+      restore.replaceChildren(el('span', { class: 'old', text: valueText(entry.value, unit) }), el('span', { class: 'arrow', text: '→' }), el('strong', { class: 'new', text: valueText(entry.previous, unit) }));
+      confirm.disabled = false;
+    };
+    if (force) describe(force);
+    else listForces().then((forces) => describe(forces.find((entry) => entry.tag === meta.name)))
+      .catch((error) => setText(about, `The forces cannot be listed: ${error.message}`));
+  });
+}
