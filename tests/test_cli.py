@@ -368,7 +368,7 @@ def test_without_a_servers_section_every_server_runs_on_loopback_default_ports(p
     from softplc.cli import build_parser
 
     adapters = {a.name: a for a in build_adapters(load_config(plant), build_parser().parse_args(["run", str(plant)]))}
-    assert set(adapters) == {"audit", "opcua", "modbus", "hmi"}
+    assert set(adapters) == {"audit", "opcua", "modbus", "metrics", "hmi"}
     assert adapters["opcua"].settings.endpoint == "opc.tcp://127.0.0.1:4840/softplc/"
     assert (adapters["modbus"].settings.host, adapters["modbus"].settings.port) == ("127.0.0.1", 5020)
     assert (adapters["hmi"].settings.host, adapters["hmi"].settings.port) == ("127.0.0.1", 8080)
@@ -411,7 +411,7 @@ def test_under_sim_servers_bind_free_ports_unless_a_flag_says_otherwise(plant: P
         "opc.tcp://127.0.0.1:4841/x/", 1502, 8181)
     off = plant.with_name("off.yaml")
     off.write_text(PLANT + "servers:\n  modbus: {enabled: false}\n")
-    assert [a.name for a in build_adapters(load_config(off), parser.parse_args(["run", str(off), "--sim"]))] == ["audit", "opcua", "hmi"]
+    assert [a.name for a in build_adapters(load_config(off), parser.parse_args(["run", str(off), "--sim"]))] == ["audit", "opcua", "metrics", "hmi"]
 
 
 def test_a_simulation_beside_a_running_plant_starts_and_serves(cli, tmp_path: Path) -> None:
@@ -429,7 +429,7 @@ def test_a_simulation_beside_a_running_plant_starts_and_serves(cli, tmp_path: Pa
                          f"  modbus: {{port: {modbus_port}}}\n  hmi: {{port: {hmi_port}}}\n")
         code, _, err = cli("run", plant, "--sim", "--duration", "0.05", "--no-status", "--state-dir", tmp_path / "sim", "--no-audit")
         assert code == 0, err
-        served = [line for line in err.splitlines() if line.startswith("serving: ")]
+        served = [line for line in err.splitlines() if line.startswith("serving: ") and not line.startswith("serving: metrics on")]
         assert len(served) == 3 and f":{opcua_port}/" not in served[0] and f":{modbus_port} " not in served[1], served
         assert served[0].startswith("serving: OPC UA on opc.tcp://127.0.0.1:") and served[1].startswith("serving: Modbus TCP on 127.0.0.1:")
         assert served[2].startswith("serving: HMI on http://127.0.0.1:") and f":{hmi_port}/" not in served[2], served

@@ -85,7 +85,7 @@ class MetricsAdapter:
 
     def describe(self) -> str:
         who = ["a bearer token" if self.token else "", "loopback" if self.settings.anonymous_loopback else "", "HMI logins"]
-        return f"metrics: {self.hmi.url.rstrip('/') or 'the HMI'}{PATH} for Prometheus (scraped by {', '.join(w for w in who if w)})"
+        return f"metrics on {self.hmi.url.rstrip('/') or 'the HMI'}{PATH} (Prometheus text format; scrapes by {', '.join(w for w in who if w)})"
 
     # -- the route --------------------------------------------------------------------------
 
