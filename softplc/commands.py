@@ -155,6 +155,12 @@ class Commands:
         self._report(origin, name, arguments, None, audited=command.audited, done=result)
         return result
 
+    def refused(self, name: str, arguments: Mapping[str, Any] | None, origin: Origin | str, reason: str) -> None:
+        """Report a call an adapter refused before calling it (no login, no CSRF token), as `db.refused` does for writes."""
+        command = self._commands.get(name)
+        self._report(origin_of(origin), name, dict(arguments or {}), CommandRefused(reason),
+                     audited=command.audited if command is not None else True)
+
     def _report(self, origin: Origin, name: str, arguments: dict[str, Any], refusal: CommandRefused | None,
                 *, audited: bool, done: Any = None) -> None:
         if not audited or origin.role is None or not self._listeners:

@@ -130,7 +130,7 @@ async def test_a_forced_tag_carries_an_f_on_every_page_and_a_banner_says_so(brow
             await ready(page)
             await page.wait_for_function("() => document.querySelector('.vrow[data-tag=\"t01_iBM\"] .forced-mark')?.hidden === false")
             await page.click(".vrow[data-tag='t01_iBM'] .n")  # its details
-            await page.wait_for_function("() => document.querySelector('dialog tr[data-tag=\"t01_iBM\"] .forced-mark')?.hidden === false")
+            await page.wait_for_function("() => document.querySelector('dialog[data-tag=\"t01_iBM\"] .forced-mark')?.hidden === false")
             assert await page.locator("dialog [data-force]").count() == 0  # a viewer may not force
             await page.keyboard.press("Escape")
             await page.goto(plant.url + "#/view/test")
@@ -176,7 +176,7 @@ async def test_an_engineer_forces_and_unforces_from_a_tags_details(browser: Any,
         await page.wait_for_selector("dialog .done >> text=Forced: limit forced to 42.0 from the next cycle.")
         await wait_until(lambda: plant.db["limit"].forced and plant.db.value("limit") == 42.0, message="forced")
         await page.click("dialog .close-x")  # back to the details: the mark and Unforce
-        await page.wait_for_function("() => document.querySelector('dialog tr[data-tag=\"limit\"] .forced-mark')?.hidden === false")
+        await page.wait_for_function("() => document.querySelector('dialog[data-tag=\"limit\"] .forced-mark')?.hidden === false")
         await page.click("dialog [data-unforce='limit']")
         await page.wait_for_selector("dialog .change >> text=42 bar")
         await page.check("dialog input[value=restore]")
@@ -196,7 +196,7 @@ async def test_viewers_and_operators_get_no_controls_and_the_api_refuses_them(br
         await log_in(page, "operator")
         await page.wait_for_selector(".vrow[data-tag='limit']")
         await page.click(".vrow[data-tag='limit'] .n")
-        await page.wait_for_selector("dialog tr[data-tag='limit'] button >> text=Write…")  # an operator writes ...
+        await page.wait_for_selector("dialog[data-tag='limit'] button >> text=Write…")  # an operator writes ...
         assert await page.locator("dialog [data-force]").count() == 0  # ... but does not force
         await page.keyboard.press("Escape")
         await page.goto(plant.url + "#/tasks")

@@ -96,8 +96,9 @@ async def test_operators_viewers_and_visitors_are_refused_by_the_role_check_and_
             csrf = await login(session, plant.url, user) if user else None
             before = len(plant.calls)
             status, body = await call(session, plant.url, csrf, "tags.force", {"tag": "limit", "value": 7})
-            role = user or "viewer"
-            assert status == 403 and body == {"error": f"role {role} may not force tags"}, (user, body)
+            role = user or "viewer"  # a visitor who has not logged in is told to, and reported with the anonymous role
+            refusal = f"role {role} may not force tags" if user else "log in to force tags"
+            assert status == 403 and body == {"error": refusal}, (user, body)
             assert not plant.db["limit"].forced
             refused = plant.calls[before:]
             assert [(c.command, c.accepted, c.origin.role.value if c.origin.role else None) for c in refused] == [("tags.force", False, role)]
@@ -115,7 +116,8 @@ async def test_a_call_without_the_sessions_csrf_token_is_refused(plant: Plant) -
         before = len(plant.calls)
         status, body = await call(session, plant.url, None, "tags.force", {"tag": "limit", "value": 7})
         assert status == 403 and "CSRF" in body["error"]
-        assert not plant.db["limit"].forced and len(plant.calls) == before  # never reached the command
+        assert not plant.db["limit"].forced  # never reached the command, but the refusal is reported (audit trail)
+        assert [(c.command, c.accepted, c.detail) for c in plant.calls[before:]] == [("tags.force", False, body["error"])]
         async with session.post(plant.url + "api/commands/tags.forces", data="{}", headers={"Origin": "http://evil.example"}) as response:
             assert response.status == 403  # another site's page: refused by the Origin check first
 

@@ -133,7 +133,7 @@ def test_run_reports_bad_settings_clearly(tmp_path: Path, capsys: pytest.Capture
     (tmp_path / "broken.yaml").write_text(SMALL.replace("opc.tcp://127.0.0.1:0/softplc/", "tcp://nowhere"))
     code, _, err = cli(capsys, monkeypatch, "run", "broken.yaml", "--no-modbus")
     assert code == 2 and "broken.yaml:8:15: endpoint must look like opc.tcp://HOST:PORT/PATH" in err
-    code, _, err = cli(capsys, monkeypatch, "run", "--no-opcua", "--no-modbus", "--no-hmi", "--duration", "0.2", "--no-status")
+    code, _, err = cli(capsys, monkeypatch, "run", "--no-opcua", "--no-modbus", "--no-hmi", "--no-audit", "--duration", "0.2", "--no-status")
     assert code == 0 and "serving: nothing" in err
 
 

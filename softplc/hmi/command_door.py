@@ -77,7 +77,8 @@ class CommandDoor:
             # A state-changing command: as for a write, a login and the session's CSRF token.
             why = ("log in to " + (command.description or name) if identity.session is None
                    else None if sessions.csrf_ok(request, identity) else "missing or wrong CSRF token (X-CSRF-Token)")
-            if why is not None:
+            if why is not None:  # reported like a refused write (the audit trail), never reaching the command
+                commands.refused(name, arguments, Origin(SOURCE, identity.user, peer, identity.role), why)
                 self.peer_log.warning(peer, "refused commands", "HMI: command %s from %s refused: %s", name, peer, why)
                 return json_response({"ok": False, "command": name, "error": why}, status=403)
         origin = Origin(SOURCE, identity.user, peer, identity.role)
