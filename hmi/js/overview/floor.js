@@ -87,7 +87,7 @@ export class Floor {
     const box = svg('rect', { class: 'station-box', x: -16, y: -16, width: 32, height: 32, rx: 5, fill: color, stroke: '#fff' });
     const label = svg('text', { class: 'station-label', x: 0, y: 5, 'text-anchor': 'middle', text: kind === 'in' ? 'IN' : 'OUT' });
     const name = svg('text', { class: 'bar-text', x: 0, y: -22, 'text-anchor': 'middle', text: short });
-    const forced = forcedBadge(-7, -54);  // above the station's name, clear of its box and bar
+    const forced = forcedBadge(-23, 6);  // on the box's lower left corner: inside the map wherever the station is
     const node = svg('g', { class: 'station', 'data-task': task.id, 'data-kind': kind, tabindex: 0, role: 'button',
       'aria-label': `${task.name} ${kind === 'in' ? 'input buffer' : 'output storage'}` }, box, label, name, forced);
     let bar = null;
