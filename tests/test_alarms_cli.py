@@ -46,10 +46,10 @@ async def test_a_viewer_lists_but_may_not_acknowledge_and_is_told_why(tmp_path, 
         assert out.splitlines()[0].split() == ["alarm", "state", "priority", "since", "message"]
         assert "level_hi" in out and "unacknowledged" in out and "level 95 m" in out
         code, out, err = await softplc(capsys, monkeypatch, server.endpoint, "alarms", "ack", "level_hi", user="viewer")
-        assert code == 1
+        assert code == 4  # not allowed, as for every OPC UA client command
         assert "refused: alarms.acknowledge needs the operator role or higher, and user 'viewer' does not have it" in err
         code, _, err = await softplc(capsys, monkeypatch, server.endpoint, "alarms", "ack", "level_hi")
-        assert code == 1 and "an anonymous session (a viewer)" in err
+        assert code == 4 and "an anonymous session (a viewer)" in err
         assert runtime.db.value("_sys.alarms.unacknowledged") == 2
 
 
@@ -72,7 +72,7 @@ async def test_an_operator_acknowledges_shelves_comments_and_exports_the_journal
         code, out, err = await softplc(capsys, monkeypatch, endpoint, "alarms", "unshelve", "nav_failed", user="operator")
         assert code == 0 and "unshelved nav_failed (now unacknowledged)" in out
         code, out, err = await softplc(capsys, monkeypatch, endpoint, "alarms", "out-of-service", "nav_failed", "--reason", "x", user="operator")
-        assert code == 1 and "needs the engineer role" in err
+        assert code == 4 and "needs the engineer role" in err
         code, out, err = await softplc(capsys, monkeypatch, endpoint, "alarms", "ack", "--all", user="operator")
         assert code == 0 and "acknowledged 1 alarm(s): nav_failed" in out
         code, out, err = await softplc(capsys, monkeypatch, endpoint, "alarms", "list", "--state", "unacknowledged")
@@ -95,7 +95,7 @@ async def test_an_operator_acknowledges_shelves_comments_and_exports_the_journal
 
 async def test_an_unreachable_runtime_is_said_plainly(tmp_path, capsys, monkeypatch) -> None:
     code, out, err = await softplc(capsys, monkeypatch, "opc.tcp://127.0.0.1:9/softplc/", "alarms", "list")
-    assert code == 1 and "softplc alarms: cannot connect to opc.tcp://127.0.0.1:9/softplc/" in err
+    assert code == 3 and "softplc alarms: cannot connect to opc.tcp://127.0.0.1:9/softplc/" in err
     assert "Traceback" not in err
 
 
@@ -103,3 +103,33 @@ async def test_an_unreachable_runtime_is_said_plainly(tmp_path, capsys, monkeypa
 def test_ack_needs_names_or_all(argv, capsys) -> None:
     assert main([*argv, "--endpoint", "opc.tcp://127.0.0.1:9/"]) == 2
     assert "name the alarms to acknowledge, or give --all" in capsys.readouterr().err
+
+
+async def test_the_endpoint_comes_from_the_plant_configuration_with_the_shared_login_options(tmp_path, capsys, monkeypatch) -> None:
+    async with running_alarm_plant(tmp_path, plant(ALARMS)) as (runtime, server):
+        await _active(runtime)
+        config = tmp_path / "where.yaml"
+        config.write_text(f"servers:\n  opcua:\n    endpoint: {server.endpoint}\n")
+        monkeypatch.setattr("sys.stdin", io.StringIO(PASSWORDS["operator"] + "\n"))
+        argv = ["alarms", "ack", "level_hi", "--config", str(config), "--user", "operator", "--password-stdin"]  # no --endpoint
+        code = await asyncio.to_thread(main, argv)
+        assert (code, capsys.readouterr().out.strip()) == (0, "acknowledged level_hi (now acknowledged)")
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    (["--certificate", "c.der"], "give --certificate and --key together"),
+    (["--certificate", "c.der", "--key", "k.pem"], "--certificate and --key are for --security Sign or SignAndEncrypt"),
+    (["--password-stdin"], "--password-stdin needs --user NAME"),
+])
+def test_contradicting_login_options_are_a_usage_error(options, message, capsys) -> None:
+    assert main(["alarms", "list", *options, "--endpoint", "opc.tcp://127.0.0.1:9/"]) == 2
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("subcommand", ["list", "ack", "shelve", "unshelve", "comment", "out-of-service", "in-service", "journal"])
+def test_every_subcommand_teaches_by_example(subcommand, capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["alarms", subcommand, "--help"])
+    out = capsys.readouterr().out
+    assert f"softplc alarms {subcommand} " in out.split("Example", 1)[1].replace("\n", " ")
+    assert "--password-stdin" in out and "--security MODE[,CERT,KEY]" in out and "--config FILE" in out

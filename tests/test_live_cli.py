@@ -270,3 +270,24 @@ async def test_signed_and_encrypted_session_with_a_made_certificate(plant, tmp_p
     code, out, err = await softplc(*arguments, password=PASSWORDS["engineer"], home=tmp_path)
     assert code == 0, err
     assert table(out)["i16"][:2] == ["0", "good"]
+
+
+async def test_the_endpoint_and_namespace_come_from_the_plant_configuration(tmp_path: Path) -> None:
+    async with running_plant(tmp_path, namespace="urn:example:line2") as (_, server):
+        port = server.endpoint.split(":")[2].split("/")[0]
+        plant = tmp_path / "line2.yaml"  # what a client needs of the plant's tagdb.yaml: its servers.opcua
+        plant.write_text(f"servers:\n  opcua:\n    endpoint: opc.tcp://0.0.0.0:{port}/softplc/\n    namespace: urn:example:line2\n")
+        code, out, err = await softplc("read", "i16", "--config", str(plant), home=tmp_path)
+        assert code == 0, err  # the endpoint (a server listening everywhere: reached on loopback) and namespace of the file
+        assert table(out)["i16"][:2] == ["0", "good"]
+        # --endpoint overrides the configuration's; its namespace still counts
+        elsewhere = tmp_path / "elsewhere.yaml"
+        elsewhere.write_text("servers:\n  opcua:\n    endpoint: opc.tcp://127.0.0.1:9/softplc/\n    namespace: urn:example:line2\n")
+        code, out, err = await softplc("read", "i16", "--config", str(elsewhere), "--endpoint", server.endpoint, home=tmp_path)
+        assert code == 0, err
+        code, _, err = await softplc("read", "i16", "--endpoint", server.endpoint, home=tmp_path)
+        assert code == 3 and "has no namespace urn:softplc:tags" in err
+        code, _, err = await softplc("read", "i16", "--endpoint", server.endpoint, "--namespace", "urn:example:line3", home=tmp_path)
+        assert code == 3 and "has no namespace urn:example:line3: it is not a softplc runtime (is --namespace right?)" in err
+    code, _, err = await softplc("read", "i16", "--config", str(tmp_path / "nowhere.yaml"), home=tmp_path)
+    assert code == 2 and f"--config {tmp_path / 'nowhere.yaml'}: no such file" in err

@@ -80,7 +80,26 @@ async def test_softplc_apply_changes_a_running_program_and_refuses_a_broken_chan
         assert err.startswith("online change refused, nothing applied: 1 problem(s):\n")
         assert f"tagdb.yaml:10:" in err and f"SyntaxError: invalid syntax ({module}.py, line" in err
         assert runtime.program("stamp").version == 2
-        # an operator may not: exit 4
+        # an operator may not: exit 4 (the configuration as --config, the shared login option)
         status, out, err = await softplc("apply", "--endpoint", server.endpoint, "--user", "operator", "--password-stdin",
-                                         str(tmp_path / "tagdb.yaml"), password=PASSWORDS["operator"])
+                                         "--config", str(tmp_path / "tagdb.yaml"), password=PASSWORDS["operator"])
         assert status == 4 and "user operator may not apply online changes" in err
+        # a change that needs a restart: exit 5, the reason in the runtime's words
+        source.write_text(source.read_text().replace("self.version = = 3", "self.version = 3"))
+        config = tmp_path / "tagdb.yaml"
+        config.write_text(config.read_text().replace("interval: 10ms", "interval: 20ms"))
+        status, out, err = await softplc("apply", *login, password=PASSWORDS["engineer"])
+        assert status == 5 and out == ""
+        assert err.startswith("online change refused, nothing applied: changes that need a restart of the runtime:\n"), err
+        assert runtime.program("stamp").version == 2
+
+
+async def test_softplc_apply_without_a_runtime_is_exit_status_3(tmp_path: Path) -> None:
+    (tmp_path / "plant.yaml").write_text("servers:\n  opcua:\n    endpoint: opc.tcp://127.0.0.1:9/softplc/\n")
+    status, out, err = await softplc("apply", "--config", str(tmp_path / "plant.yaml"), "--user", "engineer", "--password-stdin",
+                                     password="x")
+    assert (status, out) == (3, ""), err
+    assert err.strip() == ("softplc apply: cannot connect to opc.tcp://127.0.0.1:9/softplc/: connection refused "
+                           "(is `softplc run` serving OPC UA there?)")
+    status, _, err = await softplc("apply", str(tmp_path / "plant.yaml"), "--config", str(tmp_path / "other.yaml"))
+    assert status == 2 and "two configurations" in err

@@ -1,31 +1,39 @@
 """`softplc alarms list|ack|shelve|unshelve|comment|journal|out-of-service|in-service` against a running runtime.
 
-Every subcommand calls the runtime's `alarms.*` commands over OPC UA (`Objects/Commands`), logged
-in as `--user` (password from $SOFTPLC_PASSWORD, or asked for on a terminal); the runtime checks
-the role, so a viewer may list and read the journal but not acknowledge.
+Every subcommand calls the runtime's `alarms.*` commands through the OPC UA commands door
+(softplc/opcua/door_client.py), logged in with the options every client command shares
+(softplc/opcua/login.py: --endpoint or the plant's --config, --user, --password-stdin or
+$SOFTPLC_PASSWORD, --security); the runtime checks the role, so a viewer may list and read the
+journal but not acknowledge. Exit statuses, those of every OPC UA client command: 0 done, 1
+refused by the runtime (its reason), 2 bad command line, 3 no connection, 4 not allowed (the
+login refused, or the session's role may not).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import getpass
 import json
+import logging
 import math
-import os
 import sys
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
-DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/softplc/"
-PASSWORD_VARIABLE = "SOFTPLC_PASSWORD"
+from softplc.opcua.login import Login, LoginError, Security, add_login_arguments, login_from_args
+
+EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
 # What each action needs, to say so when the runtime refuses a session's role.
 NEEDS = {"alarms.acknowledge": "operator", "alarms.acknowledge_all": "operator", "alarms.shelve": "operator",
          "alarms.unshelve": "operator", "alarms.comment": "operator", "alarms.out_of_service": "engineer",
          "alarms.in_service": "engineer"}
+EXAMPLES = ("Examples: softplc alarms list --state unacknowledged | SOFTPLC_PASSWORD=... softplc alarms ack t01_input_full "
+            "--user otto | softplc alarms shelve r02_blocked --for 30min --reason 'robot in repair' --user otto | "
+            "softplc alarms journal --since 8h --export csv > journal.csv | softplc alarms list --endpoint "
+            "opc.tcp://plc7:4840/softplc/ --security SignAndEncrypt")
 STATES = ("all", "annunciated", "active", "unacknowledged", "shelved", "suppressed", "out_of_service", "normal")
+JOURNAL_PAGE = 1000  # rows per alarms.journal call
 
 
 def add_commands(subparsers: Any) -> None:
@@ -33,47 +41,57 @@ def add_commands(subparsers: Any) -> None:
     alarms = subparsers.add_parser(
         "alarms", help="alarms of a running runtime: list, acknowledge, shelve, comment, journal",
         description="Look at and act on the alarms of a running softplc over OPC UA. Acting needs an operator "
-        "(out-of-service: an engineer); give --user and the password in $SOFTPLC_PASSWORD.",
-        epilog="Examples: softplc alarms list --state unacknowledged | SOFTPLC_PASSWORD=... softplc alarms ack t01_input_full "
-        "--user otto | softplc alarms shelve r02_blocked --for 30min --reason 'robot in repair' --user otto | "
-        "softplc alarms journal --since 8h --export csv > journal.csv",
+        "(out-of-service: an engineer): give --user, and the password on stdin (--password-stdin), in "
+        "$SOFTPLC_PASSWORD or at the prompt. Each subcommand takes the login options of every OPC UA client "
+        "command (softplc alarms list --help). Exit statuses: 0 done, 1 refused, 2 bad command line, "
+        "3 no connection, 4 not allowed.",
+        epilog=EXAMPLES,
     )
     commands = alarms.add_subparsers(title="subcommands", metavar="SUBCOMMAND")
-    listing = commands.add_parser("list", help="alarms and their states")
+    listing = commands.add_parser("list", help="alarms and their states", epilog=EXAMPLES)
     listing.add_argument("--state", choices=STATES, default="annunciated", help="which alarms (default annunciated: those shown to the operator)")
     listing.add_argument("--name", metavar="PATTERN", help="only names matching PATTERN (* and ?)")
     listing.add_argument("--priority", choices=("low", "medium", "high", "critical"), help="only this priority and above")
     listing.add_argument("--format", choices=("table", "json"), default="table")
     listing.set_defaults(func=cmd_list)
-    ack = commands.add_parser("ack", help="acknowledge alarms")
+    ack = commands.add_parser("ack", help="acknowledge alarms",
+                              epilog="Examples: softplc alarms ack t01_input_full --comment 'pump checked' --user otto | "
+                              "echo \"$PW\" | softplc alarms ack --all --user otto --password-stdin")
     ack.add_argument("alarm", nargs="*", help="alarm names (or --all)")
     ack.add_argument("--all", action="store_true", help="every alarm waiting for an acknowledgement")
     ack.add_argument("--comment", default="", help="a comment for the journal")
     ack.set_defaults(func=cmd_ack)
-    shelve = commands.add_parser("shelve", help="shelve an alarm for a while, or until it returns to normal")
+    shelve = commands.add_parser("shelve", help="shelve an alarm for a while, or until it returns to normal",
+                                 epilog="Examples: softplc alarms shelve r02_blocked --for 30min --reason 'robot in repair' --user otto | "
+                                 "softplc alarms shelve t01_input_full --one-shot --reason 'known' --user otto")
     shelve.add_argument("alarm")
     how = shelve.add_mutually_exclusive_group(required=True)
     how.add_argument("--for", dest="duration", metavar="DURATION", help="e.g. 30min, 2h (at most the plant's alarms.shelve_max)")
     how.add_argument("--one-shot", action="store_true", help="until it next returns to normal")
     shelve.add_argument("--reason", required=True, help="why (kept in the journal)")
     shelve.set_defaults(func=cmd_shelve)
-    unshelve = commands.add_parser("unshelve", help="unshelve an alarm")
+    unshelve = commands.add_parser("unshelve", help="unshelve an alarm", epilog="Example: softplc alarms unshelve r02_blocked --user otto")
     unshelve.add_argument("alarm")
     unshelve.add_argument("--reason", default="")
     unshelve.set_defaults(func=cmd_unshelve)
-    comment = commands.add_parser("comment", help="comment an alarm (kept in the journal)")
+    comment = commands.add_parser("comment", help="comment an alarm (kept in the journal)",
+                                  epilog="Example: softplc alarms comment r02_blocked 'wheel ordered' --user otto")
     comment.add_argument("alarm")
     comment.add_argument("text")
     comment.set_defaults(func=cmd_comment)
-    out = commands.add_parser("out-of-service", help="take an alarm out of service (engineer)")
+    out = commands.add_parser("out-of-service", help="take an alarm out of service (engineer)",
+                              epilog="Example: softplc alarms out-of-service t03_level_hi --reason 'sensor replaced' --user erin")
     out.add_argument("alarm")
     out.add_argument("--reason", required=True)
     out.set_defaults(func=cmd_out_of_service)
-    back = commands.add_parser("in-service", help="return an alarm to service (engineer)")
+    back = commands.add_parser("in-service", help="return an alarm to service (engineer)",
+                               epilog="Example: softplc alarms in-service t03_level_hi --user erin")
     back.add_argument("alarm")
     back.add_argument("--reason", default="")
     back.set_defaults(func=cmd_in_service)
-    journal = commands.add_parser("journal", help="the journal of transitions and actions, newest first")
+    journal = commands.add_parser("journal", help="the journal of transitions and actions, newest first",
+                                  epilog="Examples: softplc alarms journal --since 8h | softplc alarms journal --alarm 't01_*' --by otto | "
+                                  "softplc alarms journal --since 2026-11-24T08:00 --export csv --out journal.csv")
     journal.add_argument("--alarm", metavar="PATTERN", help="alarm name or pattern (* and ?)")
     journal.add_argument("--since", metavar="TIME", help="ISO time (2026-11-24T08:00) or how long ago (8h, 30min)")
     journal.add_argument("--until", metavar="TIME", help="ISO time or how long ago")
@@ -90,17 +108,10 @@ def add_commands(subparsers: Any) -> None:
 
 
 def _connection_options(parser: argparse.ArgumentParser) -> None:
-    group = parser.add_argument_group("connection")
-    group.add_argument("--endpoint", metavar="URL", help=f"the runtime's OPC UA endpoint (default: servers.opcua.endpoint of --config, else {DEFAULT_ENDPOINT})")
-    group.add_argument("--config", default="tagdb.yaml", help="plant configuration to take the endpoint from (default tagdb.yaml, if present)")
-    group.add_argument("--user", metavar="USER",
-                       help=f"log in as USER (password from ${PASSWORD_VARIABLE}, or asked); default anonymous, a viewer")
-    group.add_argument("--security", choices=("None", "Sign", "SignAndEncrypt"), default="None",
-                       help="Basic256Sha256 Sign or SignAndEncrypt (a client certificate is made in ~/.softplc/cli-client; "
-                       "the server must trust it: softplc opcua trust FINGERPRINT)")
-    group.add_argument("--certificate", type=Path, metavar="DER", help="client certificate for --security (with --key)")
-    group.add_argument("--key", type=Path, metavar="PEM", help="private key of --certificate")
-    group.add_argument("--namespace", default="urn:softplc:tags", help="namespace URI of the runtime's nodes (default urn:softplc:tags)")
+    add_login_arguments(parser, user_help="; an operator acknowledges, shelves and comments, an engineer takes out of service")
+    # Until the login options were shared: --security MODE with --certificate FILE --key FILE (now MODE,CERT,KEY).
+    parser.add_argument("--certificate", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--key", type=Path, help=argparse.SUPPRESS)
 
 
 # -- subcommands ----------------------------------------------------------------------------------
@@ -112,9 +123,9 @@ def cmd_list(args: argparse.Namespace) -> int:
         arguments["name"] = args.name
     if args.priority:
         arguments["priority"] = args.priority
-    ok, alarms = _run(args, [("alarms.list", arguments)])
-    if not ok:
-        return EXIT_FAILURE
+    status, alarms = _run(args, [("alarms.list", arguments)])
+    if status != EXIT_OK:
+        return status
     alarms = alarms[0]
     if args.format == "json":
         print(json.dumps(alarms, indent=2))
@@ -174,9 +185,9 @@ def cmd_journal(args: argparse.Namespace) -> int:
         print(f"softplc alarms journal: {error}", file=sys.stderr)
         return EXIT_USAGE
     wanted = args.limit if args.limit is not None else (math.inf if args.export else 100)
-    ok, rows = _run(args, [], journal=(query, wanted))
-    if not ok:
-        return EXIT_FAILURE
+    status, rows = _run(args, [], journal=(query, wanted))
+    if status != EXIT_OK:
+        return status
     if args.export:
         stream = args.out.open("w", newline="", encoding="utf-8") if args.out else sys.stdout
         try:
@@ -207,88 +218,96 @@ def cmd_journal(args: argparse.Namespace) -> int:
 
 
 def _act(args: argparse.Namespace, calls: list[tuple[str, dict[str, Any]]]) -> int:
-    ok, results = _run(args, calls)
+    status, results = _run(args, calls)
     for result in results:
         print(result)
-    return EXIT_OK if ok else EXIT_FAILURE
+    return status
 
 
-def _run(args: argparse.Namespace, calls: list[tuple[str, dict[str, Any]]], journal: tuple[dict[str, Any], float] | None = None) -> tuple[bool, list[Any]]:
-    """Call the commands in one session; (all carried out, results); refusals are printed."""
-    from softplc.alarms.remote import RemoteCommands, RemoteError, RemoteRefused
+Journal = tuple[dict[str, Any], float]  # the alarms.journal query and how many rows are wanted
 
-    endpoint = args.endpoint or _configured_endpoint(args.config)
-    if (args.certificate is None) != (args.key is None):
-        print("softplc alarms: give --certificate and --key together", file=sys.stderr)
-        return False, []
-    password = _password(args.user)
-    security = "None" if args.security == "None" else f"Basic256Sha256_{args.security}"
 
-    async def session() -> tuple[bool, list[Any]]:
-        results: list[Any] = []
-        ok = True
-        async with RemoteCommands(endpoint, user=args.user, password=password, security=security, certificate=args.certificate,
-                                  private_key=args.key, namespace=args.namespace) as remote:
-            for name, arguments in calls:
-                try:
-                    results.append(await remote.call(name, arguments))
-                except RemoteRefused as refused:
-                    ok = False
-                    print(f"softplc alarms: refused: {_refusal(refused, name, args.user)}", file=sys.stderr)
-            if journal is not None:
-                query, wanted = journal
-                while len(results) < wanted:
-                    page = await remote.call("alarms.journal", {**query, "limit": int(min(1000, wanted - len(results))), "offset": len(results)})
-                    results.extend(page)
-                    if len(page) < 1000:
-                        break
-        return ok, results
-
+def _run(args: argparse.Namespace, calls: list[tuple[str, dict[str, Any]]], journal: Journal | None = None) -> tuple[int, list[Any]]:
+    """Call the commands in one session; (exit status, results); refusals and failures are printed."""
+    if getattr(args, "verbose", 0) < 2:
+        logging.getLogger("asyncua").setLevel(logging.CRITICAL)  # this command reports what asyncua would warn about
     try:
-        return asyncio.run(session())
-    except RemoteRefused as refused:  # the journal's pages
-        print(f"softplc alarms: refused: {_refusal(refused, 'alarms.journal', args.user)}", file=sys.stderr)
-    except RemoteError as error:
+        _old_certificate_options(args)
+        login = login_from_args(args)
+        return asyncio.run(_session(login, calls, journal))
+    except LoginError as error:
         print(f"softplc alarms: {error}", file=sys.stderr)
-    return False, []
+        return error.exit_status, []
 
 
-def _refusal(refused: Exception, name: str, user: str | None) -> str:
-    if not getattr(refused, "by_role", False):
-        return str(refused)
+async def _session(login: Login, calls: list[tuple[str, dict[str, Any]]], journal: Journal | None) -> tuple[int, list[Any]]:
+    from softplc.live.session import LiveSession, NotSoftplc
+    from softplc.opcua.door_client import CommandError, call_command
+    from softplc.opcua.login import connect
+
+    client = await connect(login)
+    results: list[Any] = []
+    status = EXIT_OK
+    try:
+        live = await LiveSession.open(client, login.namespace)
+        for name, arguments in calls:
+            try:
+                results.append(await call_command(client, live.ns, name, arguments))
+            except CommandError as error:
+                if error.no_door:
+                    raise
+                status = max(status, EXIT_NOT_ALLOWED if error.not_allowed else EXIT_REFUSED)
+                print(f"softplc alarms: refused: {_refusal(error, login.user)}", file=sys.stderr)
+        if journal is not None:
+            query, wanted = journal
+            while len(results) < wanted:
+                limit = int(min(JOURNAL_PAGE, wanted - len(results)))
+                page = await call_command(client, live.ns, "alarms.journal", {**query, "limit": limit, "offset": len(results)})
+                results.extend(page)
+                if len(page) < JOURNAL_PAGE:
+                    break
+        return status, results
+    except NotSoftplc as error:
+        print(f"softplc alarms: {login.endpoint}: {error}", file=sys.stderr)
+        return EXIT_NO_CONNECTION, []
+    except CommandError as error:  # no door, or a page of the journal refused
+        reason = f"{login.endpoint}: {error}" if error.no_door else f"refused: {_refusal(error, login.user)}"
+        print(f"softplc alarms: {reason}", file=sys.stderr)
+        return EXIT_NOT_ALLOWED if error.not_allowed else EXIT_REFUSED, []
+    except (OSError, asyncio.TimeoutError, ConnectionError) as error:
+        print(f"softplc alarms: lost the connection to {login.endpoint}: {error or type(error).__name__}", file=sys.stderr)
+        return EXIT_NO_CONNECTION, []
+    finally:
+        try:
+            await asyncio.wait_for(client.disconnect(), login.timeout)
+        except Exception:  # the server is gone already: nothing to close politely
+            client.disconnect_socket()
+
+
+def _refusal(error: Exception, user: str | None) -> str:
+    name = getattr(error, "name", "")
+    if not getattr(error, "not_allowed", False):
+        return str(error)
     who = f"user {user!r}" if user else "an anonymous session (a viewer)"
     needs = NEEDS.get(name, "another")
     return (f"{name} needs the {needs} role{' or higher' if needs == 'operator' else ''}, and {who} does not have it; "
             f"log in with --user as such a user (softplc users add NAME --role {needs} on the runtime's machine)")
 
 
-def _password(user: str | None) -> str | None:
-    if user is None:
-        return None
-    password = os.environ.get(PASSWORD_VARIABLE)
-    if password is None and sys.stdin.isatty():
-        password = getpass.getpass(f"OPC UA password of {user}: ")
-    return password or ""
-
-
-def _configured_endpoint(config: str) -> str:
-    path = Path(config)
-    if not path.is_file():
-        return DEFAULT_ENDPOINT
-    from softplc.yamlsource import ConfigError, load_yaml
-
+def _old_certificate_options(args: argparse.Namespace) -> None:
+    """--security MODE --certificate CERT --key KEY (the former spelling) as --security MODE,CERT,KEY."""
+    if args.certificate is None and args.key is None:
+        return
+    if args.certificate is None or args.key is None:
+        raise LoginError("give --certificate and --key together (better: --security MODE,CERT,KEY)", "usage")
+    mode = args.security.mode if args.security is not None else "None"
+    if mode == "None":
+        raise LoginError("--certificate and --key are for --security Sign or SignAndEncrypt", "usage")
     try:
-        data, _ = load_yaml(path)
-    except (ConfigError, OSError):
-        return DEFAULT_ENDPOINT
-    servers = data.get("servers") if isinstance(data, dict) else None
-    opcua = servers.get("opcua") if isinstance(servers, dict) else None
-    endpoint = opcua.get("endpoint") if isinstance(opcua, dict) else None
-    if not isinstance(endpoint, str):
-        return DEFAULT_ENDPOINT
-    for wildcard in ("0.0.0.0", "[::]"):  # a server listening everywhere is reached on loopback here
-        endpoint = endpoint.replace(f"//{wildcard}:", "//127.0.0.1:")
-    return endpoint
+        args.security = Security.parse(f"{mode},{args.certificate},{args.key}")
+    except ValueError as error:
+        raise LoginError(str(error), "usage") from None
+    print("softplc alarms: note: --certificate and --key are deprecated: write --security MODE,CERT,KEY", file=sys.stderr)
 
 
 def _time(text: str | None, option: str) -> float | None:

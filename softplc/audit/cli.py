@@ -185,8 +185,8 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
         raise _Failure(str(error), _LOGIN_STATUS[error.kind]) from None
 
     async def session() -> list[dict[str, Any]]:
-        from softplc.live.forces import CommandError, call_command
         from softplc.live.session import LiveSession, NotSoftplc
+        from softplc.opcua.door_client import CommandError, call_command
         from softplc.opcua.login import connect
 
         client = await connect(login)
@@ -194,7 +194,8 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
             live = await LiveSession.open(client)
             rows: list[dict[str, Any]] = []
             while len(rows) < wanted:
-                page = await call_command(live, "audit.query", {**arguments, "limit": int(min(PAGE, wanted - len(rows))), "offset": len(rows)})
+                limit = int(min(PAGE, wanted - len(rows)))
+                page = await call_command(live.client, live.ns, "audit.query", {**arguments, "limit": limit, "offset": len(rows)})
                 rows += page
                 if len(page) < PAGE:
                     break

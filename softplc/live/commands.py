@@ -72,6 +72,7 @@ def add_commands(subparsers: Any) -> None:
         "forces", help="list the forced tags of a running plant (OPC UA)",
         description="List every forced tag: its forced value, since when and who forced it. Forced tags also "
         "carry the OPC UA StatusCode GoodLocalOverride, and show F in read and watch.",
+        epilog="Examples: softplc forces | softplc forces --format json --config /srv/line2/tagdb.yaml",
     )
     forces.add_argument("--format", choices=("table", "json"), default="table")
     add_login_arguments(forces)
@@ -93,6 +94,7 @@ def add_commands(subparsers: Any) -> None:
         description="Release each forced TAG from the next scan cycle. It keeps the forced value until its "
         "owner (a program, a driver, a client) writes it again; with --restore it goes back to the value it had "
         "when it was forced.",
+        epilog="Examples: softplc unforce t01_iFr --user eng | softplc unforce r01_xgoal r01_ygoal --restore --user eng",
     )
     unforce.add_argument("tags", nargs="+", metavar="TAG")
     unforce.add_argument("--restore", action="store_true", help="put back the value the tag had before the force")
@@ -133,7 +135,7 @@ def _run(command: str, args: argparse.Namespace, body: Callable[[LiveSession], A
         client = await connect(login)
         try:
             try:
-                live = await LiveSession.open(client)
+                live = await LiveSession.open(client, login.namespace)
                 return await body(live)
             except UnknownTags as error:
                 return _fail(command, str(error), EXIT_REFUSED)
@@ -199,7 +201,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
 
         tags = await live.match(args.patterns)
         try:
-            reason = await watch(live, tags, sys.stdout, endpoint=args.endpoint, interval_ms=args.interval)
+            reason = await watch(live, tags, sys.stdout, endpoint=live.client.server_url.geturl(), interval_ms=args.interval)
         except WatchEnded as ended:
             return _fail("watch", str(ended), EXIT_NO_CONNECTION)
         print(f"softplc watch: {reason}", file=sys.stderr)
@@ -210,7 +212,8 @@ def cmd_watch(args: argparse.Namespace) -> int:
 
 def cmd_forces(args: argparse.Namespace) -> int:
     async def body(live: LiveSession) -> int:
-        from softplc.live.forces import FORCES_HEADER, UNKNOWN_BY, CommandError, list_forces
+        from softplc.live.forces import FORCES_HEADER, UNKNOWN_BY, list_forces
+        from softplc.opcua.door_client import CommandError
         from softplc.live.table import format_time, format_value, table_lines
 
         try:
@@ -252,12 +255,12 @@ def cmd_unforce(args: argparse.Namespace) -> int:
 
 async def _commands(command: str, live: LiveSession, calls: list[tuple[str, dict[str, Any]]]) -> int:
     """Call runtime commands one by one, printing what each did or why it was refused."""
-    from softplc.live.forces import CommandError, call_command
+    from softplc.opcua.door_client import CommandError, call_command
 
     status = EXIT_OK
     for name, arguments in calls:
         try:
-            print(await call_command(live, name, arguments))
+            print(await call_command(live.client, live.ns, name, arguments))
         except CommandError as error:
             print(f"softplc {command}: {error}", file=sys.stderr)
             if error.no_door:

@@ -2,7 +2,7 @@
 
 They call the runtime's commands (`tags.forces`, `tags.force`, `tags.unforce` in
 softplc/runtime_commands.py) through the server's door to them, `Objects/Commands`
-(`Call(name, argumentsJSON) -> resultJSON`, softplc/opcua/commands.py), which checks the
+(`Call(name, argumentsJSON) -> resultJSON`; client side softplc/opcua/door_client.py), which checks the
 session's role like every other path: listing is for any role, forcing for engineers.
 
 A server without that door (an older softplc) still shows its forced tags: they are served with
@@ -12,29 +12,16 @@ forced them is then unknown.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import Any
 
-from asyncua import ua
-
 from softplc.live.session import LiveSession, Reading
+from softplc.opcua.door_client import CommandError, call_command
 
 READ_CHUNK = 5000  # tags per Read request (the server takes up to 20,000)
 FORCES_HEADER = ("tag", "value", "since (UTC)", "by")
 UNKNOWN_BY = "?"
-COMMANDS_OBJECT = "Commands"
-_NO_DOOR = ("BadNodeIdUnknown", "BadNodeIdInvalid", "BadMethodInvalid", "BadNotImplemented")
-
-
-class CommandError(Exception):
-    """A command the runtime refused (`not_allowed`: because of the session's role), or no door to call it through."""
-
-    def __init__(self, message: str, *, not_allowed: bool = False, no_door: bool = False) -> None:
-        super().__init__(message)
-        self.not_allowed = not_allowed
-        self.no_door = no_door
 
 
 @dataclass(frozen=True)
@@ -52,28 +39,10 @@ class ForcedTag:
         return cls(reading.tag, reading.value, reading.timestamp, single=reading.single)
 
 
-async def call_command(session: LiveSession, name: str, arguments: dict[str, Any]) -> Any:
-    """The result of runtime command `name`; raises CommandError with the runtime's reason."""
-    commands = session.client.get_node(ua.NodeId(COMMANDS_OBJECT, session.ns))
-    try:
-        reply = await commands.call_method(ua.NodeId(f"{COMMANDS_OBJECT}.Call", session.ns), name, json.dumps(arguments))
-    except ua.UaStatusCodeError as error:
-        code = ua.StatusCode(error.code).name
-        if code == "BadUserAccessDenied":
-            raise CommandError(f"{name}: this session's role may not do that (BadUserAccessDenied)", not_allowed=True) from None
-        if code in _NO_DOOR:
-            raise CommandError("this server has no OPC UA door to the runtime's commands (Objects/Commands)", no_door=True) from None
-        raise CommandError(f"{name}: refused by the server: {code}") from None
-    answer = json.loads(reply)
-    if not answer.get("ok"):
-        raise CommandError(str(answer.get("error", "refused")))
-    return answer.get("result")
-
-
 async def list_forces(session: LiveSession) -> list[ForcedTag]:
     """Every forced tag of the server: from the runtime's `tags.forces`, else from GoodLocalOverride."""
     try:
-        forces = await call_command(session, "tags.forces", {})
+        forces = await call_command(session.client, session.ns, "tags.forces")
     except CommandError as error:
         if not error.no_door:
             raise

@@ -83,11 +83,13 @@ class LiveSession:
         self._names: list[str] | None = None
 
     @classmethod
-    async def open(cls, client: Client) -> LiveSession:
+    async def open(cls, client: Client, namespace: str = SOFTPLC_NAMESPACE) -> LiveSession:
+        """A session on the runtime serving its tags in `namespace` (a URI); raises NotSoftplc."""
         namespaces = await client.get_namespace_array()
-        if SOFTPLC_NAMESPACE not in namespaces:
-            raise NotSoftplc(f"the server has no namespace {SOFTPLC_NAMESPACE}: it is not a softplc runtime")
-        return cls(client, namespaces.index(SOFTPLC_NAMESPACE))
+        if namespace not in namespaces:
+            hint = "" if namespace == SOFTPLC_NAMESPACE else " (is --namespace right?)"
+            raise NotSoftplc(f"the server has no namespace {namespace}: it is not a softplc runtime{hint}")
+        return cls(client, namespaces.index(namespace))
 
     def node_id(self, tag: str) -> ua.NodeId:
         return ua.NodeId(tag, self.ns)

@@ -3,8 +3,12 @@
     softplc read t01_iBL --endpoint opc.tcp://plc7:4840/softplc/ --user alice --security SignAndEncrypt
     echo "$PASSWORD" | softplc write t01_iFr=45 --user alice --password-stdin
     SOFTPLC_PASSWORD=... softplc watch 't01_*' --user alice
+    softplc alarms list --config /srv/line2/tagdb.yaml    # where that plant serves, and its namespace
 
-- `--endpoint URL` (default: a softplc on this machine, `opc.tcp://127.0.0.1:4840/softplc/`);
+- `--endpoint URL`, else the `servers.opcua` endpoint of the plant's configuration (`--config
+  FILE`, default `tagdb.yaml` if there is one here), else a softplc on this machine
+  (`opc.tcp://127.0.0.1:4840/softplc/`); the tags' namespace likewise (`--namespace URI`, else the
+  configuration's, else `urn:softplc:tags`);
 - `--user NAME`, the password from `--password-stdin` (the first line of stdin), else the
   environment (`$SOFTPLC_PASSWORD`; `softplc latency`: `$SOFTPLC_LATENCY_PASSWORD`), else a
   prompt when stdin is a terminal — never on the command line, where `ps` shows it; without
@@ -14,7 +18,8 @@
   `~/.softplc/client/` and kept — the server must trust it (`softplc opcua trust FINGERPRINT`).
 
 `connect()` turns every way a connection or login fails into a `LoginError` whose message says
-what to do, and whose `kind` tells the command's exit status (cannot connect / refused).
+what to do, and whose `exit_status` is the one every client command gives for it (3 cannot
+connect, 4 refused, 2 contradicting options; docs/operations.md, "Exit statuses").
 """
 
 from __future__ import annotations
@@ -22,16 +27,22 @@ from __future__ import annotations
 import argparse
 import asyncio
 import getpass
+import logging
 import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from softplc.opcua.settings import DEFAULT_NAMESPACE
+
 if TYPE_CHECKING:  # asyncua is imported by connect() only: `softplc --help` must not load it
     from asyncua import Client
 
+log = logging.getLogger(__name__)
+
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/softplc/"
+DEFAULT_CONFIG = "tagdb.yaml"
 PASSWORD_ENV = "SOFTPLC_PASSWORD"
 MODE_NAMES = ("None", "Sign", "SignAndEncrypt")
 DEFAULT_CERTIFICATE_DIR = Path.home() / ".softplc" / "client"
@@ -45,6 +56,11 @@ class LoginError(Exception):
     def __init__(self, message: str, kind: str = "connect") -> None:
         super().__init__(message)
         self.kind = kind
+
+    @property
+    def exit_status(self) -> int:
+        """The exit status of every OPC UA client command for this failure: 3 no connection, 4 refused, 2 usage."""
+        return {"connect": 3, "refused": 4, "usage": 2}[self.kind]
 
 
 @dataclass(frozen=True)
@@ -103,6 +119,7 @@ class Login:
     password: str | None = None
     security: Security = Security("None")
     timeout: float = 4.0
+    namespace: str = DEFAULT_NAMESPACE
 
 
 def _security_argument(text: str) -> Security:
@@ -117,15 +134,20 @@ def add_login_arguments(
     *,
     endpoint: bool = True,
     timeout: bool = True,
+    timeout_default: float = 4.0,
     password_env: str = PASSWORD_ENV,
     user_help: str = "",
     security_help: str | None = None,
 ) -> None:
-    """Add --endpoint and --timeout (unless the command has its own), --user, --password-stdin, --security."""
+    """Add --endpoint, --config, --namespace and --timeout (unless the command has its own), --user, --password-stdin, --security."""
     group = parser.add_argument_group("connection and login (OPC UA)")
     if endpoint:
-        group.add_argument("--endpoint", default=DEFAULT_ENDPOINT, metavar="URL",
-                           help=f"the runtime's OPC UA endpoint (default {DEFAULT_ENDPOINT})")
+        group.add_argument("--endpoint", metavar="URL",
+                           help=f"the runtime's OPC UA endpoint (default: servers.opcua.endpoint of --config, else {DEFAULT_ENDPOINT})")
+        group.add_argument("--config", metavar="FILE",
+                           help=f"the plant's configuration, for its endpoint and namespace (default {DEFAULT_CONFIG} if there is one here)")
+        group.add_argument("--namespace", metavar="URI",
+                           help=f"the namespace URI of the runtime's tags (default: servers.opcua.namespace of --config, else {DEFAULT_NAMESPACE})")
     group.add_argument("--user", metavar="NAME",
                        help=f"log in as NAME; the password from --password-stdin, ${password_env} or a prompt "
                        f"(default: anonymous, which a softplc lets only read){user_help}")
@@ -135,8 +157,9 @@ def add_login_arguments(
                        "the client certificate and key; without them one is made in ~/.softplc/client/ "
                        "(the server must trust it: softplc opcua trust FINGERPRINT)")
     if timeout:
-        group.add_argument("--timeout", type=_seconds, default=4.0, metavar="S", help="seconds to wait for each answer (default 4)")
-    parser.set_defaults(password_env=password_env)
+        group.add_argument("--timeout", type=_seconds, default=timeout_default, metavar="S",
+                           help=f"seconds to wait for each answer (default {timeout_default:g})")
+    parser.set_defaults(password_env=password_env, login_config=endpoint)  # login_config: --config is ours (not, e.g., audit's)
 
 
 def _seconds(text: str) -> float:
@@ -168,10 +191,56 @@ def read_password(args: argparse.Namespace, stdin: TextIO | None = None) -> str 
 
 def login_from_args(args: argparse.Namespace, stdin: TextIO | None = None) -> Login:
     """The Login the options describe (the password read now); raises LoginError."""
+    endpoint, namespace = where(args)
     return Login(
-        endpoint=args.endpoint, user=args.user or None, password=read_password(args, stdin),
-        security=args.security or Security("None"), timeout=args.timeout,
+        endpoint=endpoint, user=args.user or None, password=read_password(args, stdin),
+        security=args.security or Security("None"), timeout=args.timeout, namespace=namespace,
     )
+
+
+def where(args: argparse.Namespace) -> tuple[str, str]:
+    """The endpoint and namespace: --endpoint/--namespace, else those of --config's servers.opcua, else the defaults."""
+    endpoint = (getattr(args, "endpoint", None) or "").strip() or None
+    namespace = getattr(args, "namespace", None) or None
+    if (endpoint is not None and namespace is not None) or not getattr(args, "login_config", False):
+        return endpoint or DEFAULT_ENDPOINT, namespace or DEFAULT_NAMESPACE
+    section = _opcua_section(args.config)
+    if endpoint is None:
+        endpoint = _reachable(section.get("endpoint")) or DEFAULT_ENDPOINT
+    if namespace is None:
+        namespace = section.get("namespace") if isinstance(section.get("namespace"), str) else DEFAULT_NAMESPACE
+    return endpoint, namespace
+
+
+def _opcua_section(config: str | None) -> dict[str, object]:
+    """servers.opcua of the configuration (only that: the rest of the file is not checked); {} without a file."""
+    from softplc.yamlsource import ConfigError, load_yaml
+
+    path = Path(config or DEFAULT_CONFIG)
+    if not path.is_file():
+        if config is None:  # no plant here: the defaults
+            return {}
+        raise LoginError(f"--config {config}: no such file (give the plant's configuration, or --endpoint URL)", "usage")
+    try:
+        data, _ = load_yaml(path)
+    except (ConfigError, OSError) as error:
+        if config is None:  # only found here, not asked for: a file being edited must not stop `--endpoint URL`
+            log.warning("ignoring %s for the endpoint and namespace: %s", path, error)
+            return {}
+        raise LoginError(f"cannot read {path} for the endpoint: {error} (or give --endpoint URL)", "usage") from None
+    servers = data.get("servers") if isinstance(data, dict) else None
+    section = servers.get("opcua") if isinstance(servers, dict) else None
+    return section if isinstance(section, dict) else {}
+
+
+def _reachable(endpoint: object) -> str | None:
+    """A configured endpoint as a client here reaches it: a server listening everywhere is reached on loopback."""
+    if not isinstance(endpoint, str) or not endpoint.strip():
+        return None
+    endpoint = endpoint.strip()
+    for wildcard in ("0.0.0.0", "[::]"):
+        endpoint = endpoint.replace(f"//{wildcard}:", "//127.0.0.1:")
+    return endpoint
 
 
 def with_certificate(security: Security, directory: Path = DEFAULT_CERTIFICATE_DIR) -> Security:
