@@ -3,28 +3,9 @@
 
 import { el, clear, setText } from './dom.js';
 import { writeTag, post } from './api.js';
-import { formatValue, formatWithUnit, formatRange, qualityName } from './format.js';
+import { formatValue, formatWithUnit, formatRange, formatExact, qualityName } from './format.js';
+import { showDialog, dialogHeading } from './dialog_box.js';
 import { forcedMark, showForced, forceControls } from './ops/forcing.js';
-
-/** A new modal <dialog> with `node`, removed when closed (one at a time: an open one is closed). */
-function show(node, className) {
-  for (const open of document.querySelectorAll('dialog.dialog[open]')) open.close();
-  // A fresh element each time: a closing dialog's "close" event never reaches the next one's listeners.
-  const box = el('dialog', { class: `dialog ${className || ''}` }, node);
-  document.body.append(box);
-  box.addEventListener('close', () => box.remove(), { once: true });
-  box.showModal();
-  return box;
-}
-
-function heading(text, onClose) {
-  return el('h2', {}, el('span', { text }), el('button', { type: 'button', class: 'close-x', 'aria-label': 'Close', text: '×', onclick: onClose }));
-}
-
-function exactWithUnit(value, unit) {
-  const text = typeof value === 'number' ? String(value) : formatValue(value);
-  return unit ? `${text} ${unit}` : text;
-}
 
 function parseInput(meta, text) {
   if (meta.type === 'string') return text;
@@ -99,7 +80,7 @@ export function openWrite(ctx, meta, preset) {
       change.append(
         el('span', { class: 'old', text: formatWithUnit(old, unit) }),
         el('span', { class: 'arrow', text: '→' }),
-        el('strong', { class: 'new', text: exactWithUnit(value, unit) }),  // exactly what will be written
+        el('strong', { class: 'new', text: formatExact(value, unit) }),  // exactly what will be written
       );
       clear(message);
       stepValue.hidden = true;
@@ -133,7 +114,7 @@ export function openWrite(ctx, meta, preset) {
         const item = answer.results && answer.results[0];
         if (item && item.ok) {
           result = true;
-          message.append(el('div', { class: 'done', text: `Written: ${exactWithUnit(item.value, unit)}. It applies at the next scan.` }));
+          message.append(el('div', { class: 'done', text: `Written: ${formatExact(item.value, unit)}. It applies at the next scan.` }));
           next.hidden = true;
           back.hidden = true;
           cancel.textContent = 'Close';
@@ -152,12 +133,12 @@ export function openWrite(ctx, meta, preset) {
     });
 
     form.append(
-      heading(`Write ${meta.name}`, finish),
+      dialogHeading(`Write ${meta.name}`, finish),
       meta.description ? el('p', { class: 'desc', text: meta.description }) : null,
       facts, stepValue, stepConfirm, message,
       el('div', { class: 'actions' }, cancel, back, next),
     );
-    box = show(form);
+    box = showDialog(form);
     box.addEventListener('close', () => { if (watch) watch.close(); resolve(result); }, { once: true });
     if (preset !== undefined) toConfirm(preset);
     else if (input.focus) (meta.type === 'bool' ? input.querySelector('input') : input).focus();
@@ -175,7 +156,7 @@ export function openLogin(ctx) {
     const message = el('div', { role: 'alert' });
     const submit = el('button', { type: 'submit', class: 'btn', text: 'Log in' });
     const form = el('form', { method: 'dialog' },
-      heading('Log in', close),
+      dialogHeading('Log in', close),
       el('p', { class: 'muted small', text: 'The users of the runtime (softplc users add NAME --role ROLE), the same as for OPC UA.' }),
       el('label', { for: 'login-user', text: 'User' }), user,
       el('label', { for: 'login-password', text: 'Password' }), password,
@@ -196,7 +177,7 @@ export function openLogin(ctx) {
         submit.disabled = false;
       }
     });
-    box = show(form);
+    box = showDialog(form);
     box.addEventListener('close', () => resolve(ok), { once: true });
     user.focus();
   });
@@ -243,11 +224,11 @@ export function openDetails(ctx, title, tags, subtitle) {
   update([...rows.keys()]);
   let box = null;
   const node = el('div', { class: 'body' },
-    heading(title, () => box && box.close()),
+    dialogHeading(title, () => box && box.close()),
     subtitle ? el('p', { class: 'muted small', text: subtitle }) : null,
     el('table', { class: 'detail-list' }, body),
   );
-  box = show(node, 'drawer');
+  box = showDialog(node, 'drawer');
   box.addEventListener('close', () => watch.close(), { once: true });
 }
 

@@ -6,7 +6,8 @@
 // The commands are tags.force / tags.unforce / tags.forces (commands.js); refusals show inline.
 
 import { el, clear, setText } from '../dom.js';
-import { formatValue, formatWithUnit, formatRange, formatTime, qualityName } from '../format.js';
+import { formatWithUnit, formatRange, formatTime, formatExact, qualityName } from '../format.js';
+import { showDialog, dialogHeading } from '../dialog_box.js';
 import { command, isEngineer } from './commands.js';
 
 /** The red "F" of a forced value (hidden while not forced). */
@@ -33,24 +34,6 @@ export async function listForces() {
   const answer = await command('tags.forces', {});
   if (!answer.ok) throw new Error(answer.error);
   return answer.result;
-}
-
-function show(node) {
-  for (const open of document.querySelectorAll('dialog.dialog[open]')) open.close();
-  const box = el('dialog', { class: 'dialog force-dialog' }, node);
-  document.body.append(box);
-  box.addEventListener('close', () => box.remove(), { once: true });
-  box.showModal();
-  return box;
-}
-
-function heading(text, onClose) {
-  return el('h2', {}, el('span', { text }), el('button', { type: 'button', class: 'close-x', 'aria-label': 'Close', text: '×', onclick: onClose }));
-}
-
-function valueText(value, unit) {
-  const text = typeof value === 'number' ? String(value) : formatValue(value);
-  return unit ? `${text} ${unit}` : text;
 }
 
 /** The controls a tag's details row gets: Force… for an engineer, Unforce… while it is forced. */
@@ -125,7 +108,7 @@ export function openForce(ctx, meta) {
       pending = value;
       const old = current() ? current().v : meta.value;
       change.replaceChildren(el('span', { class: 'old', text: formatWithUnit(old, unit) }), el('span', { class: 'arrow', text: '→' }),
-        el('strong', { class: 'new', text: valueText(value, unit) }), ' ', forcedMark(true));
+        el('strong', { class: 'new', text: formatExact(value, unit) }), ' ', forcedMark(true));
       clear(message);
       stepValue.hidden = true;
       stepConfirm.hidden = false;
@@ -163,13 +146,13 @@ export function openForce(ctx, meta) {
       }
     });
     form.append(
-      heading(`Force ${meta.name}`, finish),
+      dialogHeading(`Force ${meta.name}`, finish),
       meta.description ? el('p', { class: 'desc', text: meta.description }) : null,
       el('p', { class: 'warning small', text: 'Forcing pins the value: programs read it, and neither they nor any client can change it until it is unforced. Everyone sees it marked F.' }),
       facts, stepValue, stepConfirm, message,
       el('div', { class: 'actions' }, cancel, back, next),
     );
-    box = show(form);
+    box = showDialog(form, 'force-dialog');
     box.addEventListener('close', () => { watch.close(); resolve(accepted); }, { once: true });
     (meta.type === 'bool' ? input.querySelector('input') : input).focus();
   });
@@ -192,7 +175,7 @@ export function openUnforce(ctx, meta, force) {
     const confirm = el('button', { type: 'submit', class: 'btn', text: 'Confirm unforce', disabled: true });
     const cancel = el('button', { type: 'button', class: 'btn secondary', text: 'Cancel', onclick: finish });
     const form = el('form', { method: 'dialog', novalidate: true },
-      heading(`Unforce ${meta.name}`, finish), about, choices, message, el('div', { class: 'actions' }, cancel, confirm));
+      dialogHeading(`Unforce ${meta.name}`, finish), about, choices, message, el('div', { class: 'actions' }, cancel, confirm));
     const restoring = () => form.querySelector('input[name=how]:checked').value === 'restore';
     choices.addEventListener('change', () => { confirm.textContent = restoring() ? 'Confirm unforce and restore' : 'Confirm unforce'; });
     form.addEventListener('submit', async (event) => {
@@ -209,16 +192,16 @@ export function openUnforce(ctx, meta, force) {
         confirm.disabled = false;
       }
     });
-    box = show(form);
+    box = showDialog(form, 'force-dialog');
     box.addEventListener('close', () => resolve(done), { once: true });
     const describe = (entry) => {
       if (!entry) {
         setText(about, `${meta.name} is not forced now.`);
         return;
       }
-      setText(about, `Forced to ${valueText(entry.value, unit)} since ${formatTime(entry.since)} by ${entry.by}.`);
-      keep.replaceChildren(el('span', { class: 'old', text: valueText(entry.value, unit) }), el('span', { class: 'arrow', text: '→' }), el('strong', { class: 'new', text: `${valueText(entry.value, unit)}, not forced` }));
-      restore.replaceChildren(el('span', { class: 'old', text: valueText(entry.value, unit) }), el('span', { class: 'arrow', text: '→' }), el('strong', { class: 'new', text: valueText(entry.previous, unit) }));
+      setText(about, `Forced to ${formatExact(entry.value, unit)} since ${formatTime(entry.since)} by ${entry.by}.`);
+      keep.replaceChildren(el('span', { class: 'old', text: formatExact(entry.value, unit) }), el('span', { class: 'arrow', text: '→' }), el('strong', { class: 'new', text: `${formatExact(entry.value, unit)}, not forced` }));
+      restore.replaceChildren(el('span', { class: 'old', text: formatExact(entry.value, unit) }), el('span', { class: 'arrow', text: '→' }), el('strong', { class: 'new', text: formatExact(entry.previous, unit) }));
       confirm.disabled = false;
     };
     if (force) describe(force);
