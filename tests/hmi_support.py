@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import pytest_asyncio
+
 from softplc.clock import RealClock
 from softplc.config import load_config
 from softplc.hmi.server import HmiServer
@@ -31,6 +33,7 @@ ARTIFACTS = REPO / "tests" / "artifacts" / "hmi"
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+BROWSER_TIMEOUT = 8000  # ms: a 2-core machine shared by several test runs
 PASSWORDS = {"viewer": "viewer-pass-1", "operator": "operator-pass-1", "engineer": "engineer-pass-1"}
 TEST_HASH_COST = 10  # log2 N: milliseconds per login instead of the default's ~0.4 s
 SCRIPT_DESCRIPTION = '<script>window.__pwned = 1</script><img src=x onerror="window.__pwned = 2"> a <b>bold</b> claim'
@@ -259,6 +262,44 @@ async def wait_until(condition: Callable[[], Any], timeout: float = 5.0, message
 
 def chromium_available() -> bool:
     return Path(CHROMIUM).exists() and shutil.which("chromium") is not None
+
+
+@pytest_asyncio.fixture(loop_scope="module", scope="module")
+async def browser() -> AsyncIterator[Any]:
+    """Debian's Chromium for a test module (import this fixture into the module that uses it)."""
+    from playwright.async_api import async_playwright
+
+    async with async_playwright() as playwright:
+        browser = await playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield browser
+        await browser.close()
+
+
+async def open_page(browser: Any, url: str, *, width: int = 1280, height: int = 800) -> tuple[Any, Any, list[str]]:
+    """A fresh context (no cookies) and page at `url`; returns (context, page, console errors)."""
+    context = await browser.new_context(viewport={"width": width, "height": height})
+    page = await context.new_page()
+    page.set_default_timeout(BROWSER_TIMEOUT)
+    errors: list[str] = []
+    page.on("console", lambda message: errors.append(message.text) if message.type == "error" else None)
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    await page.goto(url)
+    return context, page, errors
+
+
+async def ready(page: Any) -> None:
+    """Wait until the HMI has drawn its page."""
+    await page.wait_for_selector("main[data-ready='1']")
+
+
+async def log_in(page: Any, user: str) -> None:
+    """Log in as `user` (viewer, operator or engineer) through the login dialog; the page is drawn again."""
+    await page.click("#user-box button")
+    await page.fill("#login-user", user)
+    await page.fill("#login-password", PASSWORDS[user])
+    await page.click("dialog form button[type=submit]")
+    await page.wait_for_selector(f"#user-box .who[data-role='{user}']")
+    await ready(page)
 
 
 @asynccontextmanager
