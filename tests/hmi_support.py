@@ -7,6 +7,7 @@ are those of FIELD-NOTES. A failed browser test saves a screenshot under tests/a
 from __future__ import annotations
 
 import asyncio
+import json
 import shutil
 import textwrap
 import time
@@ -16,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import aiohttp
 import pytest_asyncio
 
 from softplc.clock import RealClock
@@ -262,6 +264,36 @@ async def wait_until(condition: Callable[[], Any], timeout: float = 5.0, message
 
 def chromium_available() -> bool:
     return Path(CHROMIUM).exists() and shutil.which("chromium") is not None
+
+
+def http_client() -> aiohttp.ClientSession:
+    """An HTTP client that keeps its cookies (the session) as a browser would."""
+    # unsafe=True: aiohttp's cookie jar ignores cookies of IP-address hosts (127.0.0.1) otherwise.
+    return aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True))
+
+
+async def http_login(session: aiohttp.ClientSession, url: str, user: str) -> str:
+    """Log `session` in as `user` through POST /api/login; returns the CSRF token."""
+    async with session.post(url + "api/login", json={"user": user, "password": PASSWORDS[user]}) as response:
+        assert response.status == 200, await response.text()
+        return (await response.json())["csrf"]
+
+
+async def post_command(session: aiohttp.ClientSession, url: str, name: str, arguments: Any = None, csrf: str | None = None,
+                       **headers: str) -> tuple[int, Any]:
+    """POST /api/commands/NAME with `arguments` as JSON; returns (status, the whole answer read as strict JSON)."""
+    sent = {"X-CSRF-Token": csrf} if csrf else {}
+    data = json.dumps(arguments if arguments is not None else {})
+    async with session.post(url + f"api/commands/{name}", data=data, headers={"Content-Type": "application/json", **sent, **headers}) as response:
+        return response.status, strict_json(await response.text())
+
+
+def strict_json(text: str) -> Any:
+    """JSON as a browser's JSON.parse reads it: NaN and Infinity are errors (Python's json accepts them)."""
+    def refuse(constant: str) -> Any:
+        raise ValueError(f"{constant} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
 
 
 @pytest_asyncio.fixture(loop_scope="module", scope="module")
