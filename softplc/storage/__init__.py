@@ -23,7 +23,7 @@ Tests get a real PostgreSQL server from the `postgres_dsn` fixture (tests/postgr
 and both backends from `storage_database` (see tests/conftest.py).
 """
 
-from softplc.storage.database import Backend, Database, StorageError
+from softplc.storage.database import Backend, Database, StorageError, remove_sqlite_store
 from softplc.storage.partitions import PartitionCatalogue, insert_rows
 from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, storage_problems
 from softplc.storage.writer import BatchWriter, Sink, WriterStats
@@ -40,5 +40,6 @@ __all__ = [
     "WriterStats",
     "insert_rows",
     "parse_span",
+    "remove_sqlite_store",
     "storage_problems",
 ]

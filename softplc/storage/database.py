@@ -31,6 +31,13 @@ def driver_errors() -> tuple[type[BaseException], ...]:
     return tuple(errors)
 
 
+def remove_sqlite_store(path: Path) -> None:
+    """Delete a SQLite store with its WAL and shared-memory files (a simulated run starts afresh); raises OSError."""
+    # The WAL with the file: a new database at `path` must never replay the old file's journal.
+    for suffix in ("", "-wal", "-shm"):
+        path.with_name(path.name + suffix).unlink(missing_ok=True)
+
+
 class Database:
     """Where records are kept; `connect()` opens a DB-API connection, `sql()` adapts `?` placeholders."""
 
