@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import IO, Any
 
 from softplc.events import Event
-from softplc.storage import BatchWriter, Database
+from softplc.storage import BatchWriter, Database, escape_like, like_pattern
 
 TABLE = "alarm_journal"
 MAX_ROWS = 10_000  # most rows one search returns
@@ -144,7 +144,7 @@ def search(database: Database, query: JournalQuery, plant: str | None) -> list[J
         values.append(wanted_plant)
     if query.alarm:
         where.append("lower(alarm) LIKE ? ESCAPE '\\'")
-        values.append(_like(query.alarm.lower()))
+        values.append(like_pattern(query.alarm.lower()))
     if query.since is not None:
         where.append("time >= ?")
         values.append(query.since)
@@ -153,7 +153,7 @@ def search(database: Database, query: JournalQuery, plant: str | None) -> list[J
         values.append(query.until)
     if query.text:
         where.append("(lower(message) LIKE ? ESCAPE '\\' OR lower(comment) LIKE ? ESCAPE '\\' OR lower(user_name) LIKE ? ESCAPE '\\')")
-        pattern = "%" + _escape(query.text.lower()) + "%"
+        pattern = "%" + escape_like(query.text.lower()) + "%"
         values.extend([pattern] * 3)
     if query.user:
         where.append("user_name = ?")
@@ -168,7 +168,7 @@ def search(database: Database, query: JournalQuery, plant: str | None) -> list[J
     statement += f" ORDER BY time DESC, id DESC LIMIT {limit} OFFSET {max(0, int(query.offset))}"
     connection = database.connect(readonly=True)
     try:
-        if not _has_table(connection, database):
+        if not database.has_table(connection, TABLE):
             return []
         rows = connection.execute(database.sql(statement), values).fetchall()
     finally:
@@ -193,23 +193,6 @@ def write_csv(entries: Iterable[JournalEntry], stream: IO[str]) -> int:
 def entries_from_dicts(rows: Sequence[dict[str, Any]]) -> list[JournalEntry]:
     """Rows received as JSON (the OPC UA commands door) back into entries."""
     return [JournalEntry(**{name: row[name] for name in COLUMNS}) for row in rows]
-
-
-def _has_table(connection: Any, database: Database) -> bool:
-    if database.postgresql:
-        found = connection.execute("SELECT to_regclass(%s)", (TABLE,)).fetchone()
-        return bool(found and found[0])
-    found = connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (TABLE,)).fetchone()
-    return found is not None
-
-
-def _escape(text: str) -> str:
-    return text.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
-
-
-def _like(pattern: str) -> str:
-    """A name pattern with * and ? as a LIKE pattern (other characters literal)."""
-    return _escape(pattern).replace("*", "%").replace("?", "_")
 
 
 def _text(value: Any) -> str:

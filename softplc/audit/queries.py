@@ -16,7 +16,7 @@ from typing import IO, Any
 
 from softplc.audit.entry import COLUMNS, AuditEntry, entry_of, format_time, format_value
 from softplc.audit.store import CATALOGUE, SQL_COLUMNS
-from softplc.storage import Database
+from softplc.storage import Database, like_pattern
 
 MAX_ROWS = 10_000  # most rows one search returns
 KINDS = ("write", "command")
@@ -107,18 +107,13 @@ def _match(column: str, pattern: str, values: list[Any], postgresql: bool) -> st
     if not postgresql:
         values.append(pattern.replace("[", "[[]"))  # SQLite's GLOB: * and ?, case-sensitive like names
         return f"{column} GLOB ?"
-    escaped = pattern.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
-    values.append(escaped.replace("*", "%").replace("?", "_"))
+    values.append(like_pattern(pattern))
     return f"{column} LIKE ? ESCAPE '\\'"
 
 
 def _partitions(connection: Any, database: Database, query: AuditQuery) -> list[str]:
     """The partitions that may hold entries of the query's time range, newest first."""
-    if database.postgresql:
-        found = connection.execute("SELECT to_regclass(%s)", (CATALOGUE,)).fetchone()
-        if not (found and found[0]):
-            return []
-    elif connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (CATALOGUE,)).fetchone() is None:
+    if not database.has_table(connection, CATALOGUE):
         return []
     statement = f"SELECT name FROM {CATALOGUE} WHERE stop > ? AND start < ? ORDER BY start DESC"
     since = query.since if query.since is not None else -1e300

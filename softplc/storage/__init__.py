@@ -23,7 +23,7 @@ Tests get a real PostgreSQL server from the `postgres_dsn` fixture (tests/postgr
 and both backends from `storage_database` (see tests/conftest.py).
 """
 
-from softplc.storage.database import Backend, Database, StorageError, remove_sqlite_store
+from softplc.storage.database import Backend, Database, StorageError, escape_like, like_pattern, remove_sqlite_store
 from softplc.storage.partitions import PartitionCatalogue, insert_rows
 from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, storage_problems
 from softplc.storage.writer import BatchWriter, Sink, WriterStats
@@ -38,7 +38,9 @@ __all__ = [
     "StorageError",
     "StorageSettings",
     "WriterStats",
+    "escape_like",
     "insert_rows",
+    "like_pattern",
     "parse_span",
     "remove_sqlite_store",
     "storage_problems",
