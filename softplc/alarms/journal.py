@@ -19,6 +19,7 @@ from typing import IO, Any
 
 from softplc.events import Event
 from softplc.storage import BatchWriter, Database, escape_like, like_pattern
+from softplc.timestamps import format_utc
 
 TABLE = "alarm_journal"
 MAX_ROWS = 10_000  # most rows one search returns
@@ -178,14 +179,11 @@ def search(database: Database, query: JournalQuery, plant: str | None) -> list[J
 
 def write_csv(entries: Iterable[JournalEntry], stream: IO[str]) -> int:
     """Write rows as CSV with a header (time as ISO 8601 UTC and as seconds); returns how many."""
-    from datetime import datetime, timezone
-
     writer = csv.writer(stream)
     writer.writerow(["time_utc", *COLUMNS])
     count = 0
     for entry in entries:
-        stamp = datetime.fromtimestamp(entry.time, timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
-        writer.writerow([stamp, *(getattr(entry, name) for name in COLUMNS)])
+        writer.writerow([format_utc(entry.time), *(getattr(entry, name) for name in COLUMNS)])
         count += 1
     return count
 

@@ -14,9 +14,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import IO, Any
 
-from softplc.audit.entry import COLUMNS, AuditEntry, entry_of, format_time, format_value
+from softplc.audit.entry import COLUMNS, AuditEntry, entry_of, format_value
 from softplc.audit.store import CATALOGUE, SQL_COLUMNS
 from softplc.storage import Database, like_pattern
+from softplc.timestamps import format_utc
 
 MAX_ROWS = 10_000  # most rows one search returns
 KINDS = ("write", "command")
@@ -128,6 +129,6 @@ def write_csv(entries: Iterable[AuditEntry], stream: IO[str]) -> int:
     count = 0
     for entry in entries:
         cells = [format_value(getattr(entry, name)) if name in ("arguments", "old", "new") else getattr(entry, name) for name in COLUMNS]
-        writer.writerow([format_time(entry.time), *cells])
+        writer.writerow([format_utc(entry.time), *cells])
         count += 1
     return count
