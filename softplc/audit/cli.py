@@ -186,19 +186,17 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
 
     async def session() -> list[dict[str, Any]]:
         from softplc.live.forces import CommandError, call_command
-        from softplc.live.session import LiveSession, NotSoftplc
-        from softplc.opcua.login import connect
+        from softplc.live.session import NotSoftplc, open_live_session
 
-        client = await connect(login)
         try:
-            live = await LiveSession.open(client)
-            rows: list[dict[str, Any]] = []
-            while len(rows) < wanted:
-                page = await call_command(live, "audit.query", {**arguments, "limit": int(min(PAGE, wanted - len(rows))), "offset": len(rows)})
-                rows += page
-                if len(page) < PAGE:
-                    break
-            return rows
+            async with open_live_session(login) as live:
+                rows: list[dict[str, Any]] = []
+                while len(rows) < wanted:
+                    page = await call_command(live, "audit.query", {**arguments, "limit": int(min(PAGE, wanted - len(rows))), "offset": len(rows)})
+                    rows += page
+                    if len(page) < PAGE:
+                        break
+                return rows
         except NotSoftplc as error:
             raise _Failure(f"{login.endpoint}: {error}", EXIT_NO_CONNECTION) from None
         except CommandError as error:
@@ -209,11 +207,6 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
             if error.no_door:
                 raise _Failure(f"{login.endpoint}: {error}") from None
             raise _Failure(str(error)) from None
-        finally:
-            try:
-                await asyncio.wait_for(client.disconnect(), login.timeout)
-            except Exception:  # the server is gone already: nothing to close politely
-                client.disconnect_socket()
 
     try:
         return asyncio.run(session())
