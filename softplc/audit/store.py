@@ -89,18 +89,14 @@ class AuditSink:
         self._partitions.clear()
 
     def _partition(self, connection: Any, database: Database, start: float) -> str:
-        name = PARTITIONS.name(start)
-        if start in self._partitions:
-            return name
-        cursor = connection.cursor()
-        PARTITIONS.lock(cursor, database)
-        columns = ", ".join(f"{column} {_TYPES.get(column, 'TEXT NOT NULL')}" for column in SQL_COLUMNS)
-        cursor.execute(f"CREATE TABLE IF NOT EXISTS {name} ({columns})")
-        cursor.execute(f"CREATE INDEX IF NOT EXISTS {name}_time ON {name} (time)")
-        cursor.execute(f"CREATE INDEX IF NOT EXISTS {name}_tag ON {name} (tag, time)")
-        PARTITIONS.register(cursor, database, start, self.partition)
-        self._partitions.add(start)
-        return name
+        return PARTITIONS.ensure(connection, database, start, self.partition, self._partitions, _create_partition)
+
+
+def _create_partition(cursor: Any, name: str) -> None:
+    columns = ", ".join(f"{column} {_TYPES.get(column, 'TEXT NOT NULL')}" for column in SQL_COLUMNS)
+    cursor.execute(f"CREATE TABLE IF NOT EXISTS {name} ({columns})")
+    cursor.execute(f"CREATE INDEX IF NOT EXISTS {name}_time ON {name} (time)")
+    cursor.execute(f"CREATE INDEX IF NOT EXISTS {name}_tag ON {name} (tag, time)")
 
 
 @contextlib.contextmanager

@@ -165,21 +165,18 @@ class HistorySink:
         self._ids.update({name: int(tag_id) for name, tag_id in cursor.fetchall()})
 
     def _partition(self, connection: Any, database: Database, start: float) -> str:
-        name = PARTITIONS.name(start)
-        if start in self._partitions:
-            return name
-        cursor = connection.cursor()
-        PARTITIONS.lock(cursor, database)
-        cursor.execute(f"CREATE TABLE IF NOT EXISTS {name} (tag INTEGER NOT NULL, time DOUBLE PRECISION NOT NULL, "
-                       "value DOUBLE PRECISION, text TEXT, quality SMALLINT NOT NULL)")
-        cursor.execute(f"CREATE INDEX IF NOT EXISTS {name}_tag_time ON {name} (tag, time)")
-        for suffix, _ in LEVELS:
-            cursor.execute(f"CREATE TABLE IF NOT EXISTS {name}_{suffix} (tag INTEGER NOT NULL, cell DOUBLE PRECISION NOT NULL, "
-                           "count INTEGER NOT NULL, vmin DOUBLE PRECISION NOT NULL, tmin DOUBLE PRECISION NOT NULL, "
-                           "vmax DOUBLE PRECISION NOT NULL, tmax DOUBLE PRECISION NOT NULL, PRIMARY KEY (tag, cell))")
-        PARTITIONS.register(cursor, database, start, self.partition)
-        self._partitions.add(start)
-        return name
+        return PARTITIONS.ensure(connection, database, start, self.partition, self._partitions, _create_partition)
+
+
+def _create_partition(cursor: Any, name: str) -> None:
+    """A partition's samples and its min/max cell tables."""
+    cursor.execute(f"CREATE TABLE IF NOT EXISTS {name} (tag INTEGER NOT NULL, time DOUBLE PRECISION NOT NULL, "
+                   "value DOUBLE PRECISION, text TEXT, quality SMALLINT NOT NULL)")
+    cursor.execute(f"CREATE INDEX IF NOT EXISTS {name}_tag_time ON {name} (tag, time)")
+    for suffix, _ in LEVELS:
+        cursor.execute(f"CREATE TABLE IF NOT EXISTS {name}_{suffix} (tag INTEGER NOT NULL, cell DOUBLE PRECISION NOT NULL, "
+                       "count INTEGER NOT NULL, vmin DOUBLE PRECISION NOT NULL, tmin DOUBLE PRECISION NOT NULL, "
+                       "vmax DOUBLE PRECISION NOT NULL, tmax DOUBLE PRECISION NOT NULL, PRIMARY KEY (tag, cell))")
 
 
 def _upsert_cells(connection: Any, database: Database, table: str, cells: list[tuple[Any, ...]]) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from softplc.storage.database import Database
@@ -48,6 +48,19 @@ class PartitionCatalogue:
         """List the partition [start, start + size) in the catalogue (once: a second time changes nothing)."""
         cursor.execute(database.sql(f"INSERT INTO {self.table} (start, stop, name) VALUES (?, ?, ?) ON CONFLICT (start) DO NOTHING"),
                        (start, start + size, self.name(start)))
+
+    def ensure(self, connection: Any, database: Database, start: float, size: float, known: set[float],
+               create: Callable[[Any, str], None]) -> str:
+        """The table of the partition [start, start + size); unless `start` is `known`, made by `create(cursor, name)` and listed."""
+        name = self.name(start)
+        if start in known:
+            return name
+        cursor = connection.cursor()
+        self.lock(cursor, database)
+        create(cursor, name)
+        self.register(cursor, database, start, size)
+        known.add(start)
+        return name
 
     def drop_before(self, connection: Any, database: Database, cutoff: float) -> list[str]:
         """Drop every partition that ends at or before `cutoff` (whole tables); return their names."""
