@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import IO, Any
 
 from softplc.events import Event
-from softplc.storage import BatchWriter, Database, escape_like, like_pattern
+from softplc.storage import BatchWriter, Database, escape_like, like_pattern, plant_and_time
 from softplc.timestamps import format_utc
 
 TABLE = "alarm_journal"
@@ -137,21 +137,10 @@ class AlarmJournal:
 
 def search(database: Database, query: JournalQuery, plant: str | None) -> list[JournalEntry]:
     """Rows of a journal store matching `query` (`plant` is whose rows `query.plant=None` means)."""
-    where: list[str] = []
-    values: list[Any] = []
-    wanted_plant = plant if query.plant is None else query.plant
-    if wanted_plant not in (None, "", "*"):
-        where.append("plant = ?")
-        values.append(wanted_plant)
+    where, values = plant_and_time(query.plant, plant, query.since, query.until)
     if query.alarm:
         where.append("lower(alarm) LIKE ? ESCAPE '\\'")
         values.append(like_pattern(query.alarm.lower()))
-    if query.since is not None:
-        where.append("time >= ?")
-        values.append(query.since)
-    if query.until is not None:
-        where.append("time < ?")
-        values.append(query.until)
     if query.text:
         where.append("(lower(message) LIKE ? ESCAPE '\\' OR lower(comment) LIKE ? ESCAPE '\\' OR lower(user_name) LIKE ? ESCAPE '\\')")
         pattern = "%" + escape_like(query.text.lower()) + "%"

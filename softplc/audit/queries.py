@@ -16,7 +16,7 @@ from typing import IO, Any
 
 from softplc.audit.entry import COLUMNS, AuditEntry, entry_of, format_value
 from softplc.audit.store import CATALOGUE, SQL_COLUMNS
-from softplc.storage import Database, like_pattern
+from softplc.storage import Database, like_pattern, plant_and_time
 from softplc.timestamps import format_utc
 
 MAX_ROWS = 10_000  # most rows one search returns
@@ -65,18 +65,7 @@ def search(database: Database, query: AuditQuery, plant: str | None) -> list[Aud
 
 
 def _conditions(query: AuditQuery, plant: str | None, postgresql: bool) -> tuple[list[str], list[Any]]:
-    where: list[str] = []
-    values: list[Any] = []
-    wanted_plant = plant if query.plant is None else query.plant
-    if wanted_plant not in (None, "", "*"):
-        where.append("plant = ?")
-        values.append(wanted_plant)
-    if query.since is not None:
-        where.append("time >= ?")
-        values.append(query.since)
-    if query.until is not None:
-        where.append("time < ?")
-        values.append(query.until)
+    where, values = plant_and_time(query.plant, plant, query.since, query.until)
     targets: list[str] = []
     if query.tag:
         targets.append(_match("tag", query.tag, values, postgresql))

@@ -18,13 +18,16 @@ The contract (stable; the alarm journal builds on it):
 - `PartitionCatalogue(prefix, lock_key)` names, lists and drops a store's time partitions (one
   table per period, retention drops whole tables); `insert_rows` writes rows into one (COPY on
   PostgreSQL). The historian and the audit trail keep their rows this way.
+- `sql.py`: name patterns as LIKE (`like_pattern`) and a shared store's plant and time
+  conditions (`plant_and_time`), for the searches of the audit trail and the alarm journal.
 
 Tests get a real PostgreSQL server from the `postgres_dsn` fixture (tests/postgres_server.py)
 and both backends from `storage_database` (see tests/conftest.py).
 """
 
-from softplc.storage.database import Backend, Database, StorageError, escape_like, like_pattern, remove_sqlite_store
+from softplc.storage.database import Backend, Database, StorageError, remove_sqlite_store
 from softplc.storage.partitions import PartitionCatalogue, insert_rows
+from softplc.storage.sql import escape_like, like_pattern, plant_and_time
 from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, storage_problems
 from softplc.storage.writer import BatchWriter, Sink, WriterStats
 
@@ -42,6 +45,7 @@ __all__ = [
     "insert_rows",
     "like_pattern",
     "parse_span",
+    "plant_and_time",
     "remove_sqlite_store",
     "storage_problems",
 ]

@@ -31,16 +31,6 @@ def driver_errors() -> tuple[type[BaseException], ...]:
     return tuple(errors)
 
 
-def escape_like(text: str) -> str:
-    """`text` with LIKE's wildcards taken literally (for `LIKE ? ESCAPE '\\'`)."""
-    return text.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
-
-
-def like_pattern(pattern: str) -> str:
-    """A name pattern with * and ? as a LIKE pattern (for `LIKE ? ESCAPE '\\'`; other characters literal)."""
-    return escape_like(pattern).replace("*", "%").replace("?", "_")
-
-
 def remove_sqlite_store(path: Path) -> None:
     """Delete a SQLite store with its WAL and shared-memory files (a simulated run starts afresh); raises OSError."""
     # The WAL with the file: a new database at `path` must never replay the old file's journal.
