@@ -3,8 +3,9 @@
 
 import { el, clear, setText } from './dom.js';
 import { writeTag, post } from './api.js';
-import { formatValue, formatWithUnit, formatRange, formatExact, qualityName } from './format.js';
+import { formatValue, formatWithUnit, formatExact, qualityName } from './format.js';
 import { showDialog, dialogHeading } from './dialog_box.js';
+import { tagFacts, valueEntry } from './value_entry.js';
 import { forcedMark, showForced, forceControls } from './ops/forcing.js';
 
 function parseInput(meta, text) {
@@ -26,44 +27,16 @@ export function openWrite(ctx, meta, preset) {
     const finish = () => { if (box) box.close(); };
     const unit = meta.unit || '';
     const current = () => ctx.live.get(meta.name);
-    let watch = null;
 
     const form = el('form', { method: 'dialog', novalidate: true });
-    const currentText = el('span', { class: 'live-value num' });
-    const showCurrent = () => {
-      const item = current();
-      setText(currentText, item ? `${formatWithUnit(item.v, unit)} (${qualityName(item.q)})` : formatWithUnit(meta.value, unit));
-    };
-    watch = ctx.live.watch([meta.name], showCurrent);
-    showCurrent();
-
-    let input;
-    const entry = el('div');
-    if (meta.type === 'bool') {
-      const now = current() ? current().v : meta.value;
-      const make = (value) => el('label', {}, el('input', { type: 'radio', name: 'value', value: String(value), checked: value === !now }), value ? 'true' : 'false');
-      input = el('div', { class: 'choices', role: 'radiogroup', 'aria-label': 'New value' }, make(true), make(false));
-      entry.append(el('label', { text: 'New value' }), input);
-    } else {
-      input = el('input', { type: 'text', name: 'value', autocomplete: 'off', inputmode: meta.type === 'string' ? 'text' : 'decimal', id: 'write-value' });
-      const now = current() ? current().v : meta.value;
-      input.value = now === undefined || now === null ? '' : String(now);
-      entry.append(el('label', { for: 'write-value', text: `New value${unit ? ` (${unit})` : ''}` }), input);
-    }
+    const { facts, watch } = tagFacts(ctx, meta);
+    const field = valueEntry(ctx, meta, { id: 'write-value', label: 'New value' });
+    const entry = field.entry;
     const readValue = () => {
-      if (meta.type === 'bool') {
-        const checked = input.querySelector('input:checked');
-        return checked ? checked.value === 'true' : null;
-      }
-      return parseInput(meta, input.value);
+      const value = field.read();
+      return meta.type === 'bool' || value === null ? value : parseInput(meta, value);
     };
 
-    const facts = el('dl', { class: 'kv small' },
-      el('dt', { text: 'Now' }), el('dd', {}, currentText),
-      el('dt', { text: 'Type' }), el('dd', { text: meta.type }),
-    );
-    const range = formatRange(meta);
-    if (range) facts.append(el('dt', { text: 'Range' }), el('dd', { text: `${range}${unit ? ` ${unit}` : ''}` }));
     const message = el('div', { role: 'alert' });
     const stepValue = el('div', {}, entry);
     const change = el('div', { class: 'change num' });
@@ -139,9 +112,9 @@ export function openWrite(ctx, meta, preset) {
       el('div', { class: 'actions' }, cancel, back, next),
     );
     box = showDialog(form);
-    box.addEventListener('close', () => { if (watch) watch.close(); resolve(result); }, { once: true });
+    box.addEventListener('close', () => { watch.close(); resolve(result); }, { once: true });
     if (preset !== undefined) toConfirm(preset);
-    else if (input.focus) (meta.type === 'bool' ? input.querySelector('input') : input).focus();
+    else field.focus();
   });
 }
 

@@ -6,8 +6,9 @@
 // The commands are tags.force / tags.unforce / tags.forces (commands.js); refusals show inline.
 
 import { el, clear, setText } from '../dom.js';
-import { formatWithUnit, formatRange, formatTime, formatExact, qualityName } from '../format.js';
+import { formatWithUnit, formatTime, formatExact } from '../format.js';
 import { showDialog, dialogHeading } from '../dialog_box.js';
+import { tagFacts, valueEntry } from '../value_entry.js';
 import { command, isEngineer } from './commands.js';
 
 /** The red "F" of a forced value (hidden while not forced). */
@@ -61,41 +62,16 @@ export function openForce(ctx, meta) {
     const finish = () => { if (box) box.close(); };
     const unit = meta.unit || '';
     const current = () => ctx.live.get(meta.name);
-    const now = el('span', { class: 'live-value num' });
     const mark = forcedMark(false);
-    const showNow = () => {
-      const item = current();
-      setText(now, item ? `${formatWithUnit(item.v, unit)} (${qualityName(item.q)})` : formatWithUnit(meta.value, unit));
-      showForced(mark, item && item.f);
-    };
-    const watch = ctx.live.watch([meta.name], showNow);
-    showNow();
-
-    let input;
-    const entry = el('div');
-    if (meta.type === 'bool') {
-      const value = current() ? current().v : meta.value;
-      const make = (choice) => el('label', {}, el('input', { type: 'radio', name: 'value', value: String(choice), checked: choice === !value }), choice ? 'true' : 'false');
-      input = el('div', { class: 'choices', role: 'radiogroup', 'aria-label': 'Forced value' }, make(true), make(false));
-      entry.append(el('label', { text: 'Force to' }), input);
-    } else {
-      input = el('input', { type: 'text', name: 'value', autocomplete: 'off', id: 'force-value', inputmode: meta.type === 'string' ? 'text' : 'decimal' });
-      const value = current() ? current().v : meta.value;
-      input.value = value === undefined || value === null ? '' : String(value);
-      entry.append(el('label', { for: 'force-value', text: `Force to${unit ? ` (${unit})` : ''}` }), input);
-    }
+    const { facts, watch } = tagFacts(ctx, meta, mark, (item) => showForced(mark, item && item.f));
+    const field = valueEntry(ctx, meta, { id: 'force-value', label: 'Force to', group: 'Forced value' });
+    const entry = field.entry;
     // Typed JSON for a bool; the text otherwise, parsed by the runtime by the tag's type (as `softplc force` does).
     const readValue = () => {
-      if (meta.type === 'bool') {
-        const checked = input.querySelector('input:checked');
-        return checked ? checked.value === 'true' : null;
-      }
-      return meta.type === 'string' ? input.value : input.value.trim();
+      const value = field.read();
+      return meta.type === 'bool' || meta.type === 'string' || value === null ? value : value.trim();
     };
 
-    const facts = el('dl', { class: 'kv small' }, el('dt', { text: 'Now' }), el('dd', {}, now, ' ', mark), el('dt', { text: 'Type' }), el('dd', { text: meta.type }));
-    const range = formatRange(meta);
-    if (range) facts.append(el('dt', { text: 'Range' }), el('dd', { text: `${range}${unit ? ` ${unit}` : ''}` }));
     const message = el('div', { role: 'alert' });
     const stepValue = el('div', {}, entry);
     const change = el('div', { class: 'change num' });
@@ -154,7 +130,7 @@ export function openForce(ctx, meta) {
     );
     box = showDialog(form, 'force-dialog');
     box.addEventListener('close', () => { watch.close(); resolve(accepted); }, { once: true });
-    (meta.type === 'bool' ? input.querySelector('input') : input).focus();
+    field.focus();
   });
 }
 
