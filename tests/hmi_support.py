@@ -288,6 +288,16 @@ async def post_command(session: aiohttp.ClientSession, url: str, name: str, argu
         return response.status, strict_json(await response.text())
 
 
+async def receive_until(ws: aiohttp.ClientWebSocketResponse, wanted: str | Callable[[dict[str, Any]], bool],
+                        timeout: float = 5.0) -> dict[str, Any]:
+    """The next live-channel message of type `wanted` (or for which `wanted(message)` is true), read as strict JSON."""
+    deadline = time.monotonic() + timeout
+    while True:
+        message = strict_json((await ws.receive(timeout=max(0.01, deadline - time.monotonic()))).data)
+        if (message["type"] == wanted) if isinstance(wanted, str) else wanted(message):
+            return message
+
+
 def strict_json(text: str) -> Any:
     """JSON as a browser's JSON.parse reads it: NaN and Infinity are errors (Python's json accepts them)."""
     def refuse(constant: str) -> Any:

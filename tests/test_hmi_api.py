@@ -18,7 +18,7 @@ import aiohttp
 import pytest
 import pytest_asyncio
 
-from hmi_support import DRIVER, PASSWORDS, Plant, http_client, http_login, start_plant, wait_until
+from hmi_support import DRIVER, PASSWORDS, Plant, http_client, http_login, receive_until, start_plant, wait_until
 from softplc.tagdb import Rule, WriteEvent, WriteRejected
 from softplc.tags import Quality
 
@@ -177,14 +177,6 @@ async def test_the_live_channel_refuses_another_origin(plant: Plant) -> None:
         async with session.ws_connect(plant.url + "api/live", origin=plant.url.rstrip("/")) as ws:
             hello = json.loads((await ws.receive(timeout=5)).data)
             assert hello["type"] == "hello" and hello["role"] == "viewer"
-
-
-async def receive_until(ws: aiohttp.ClientWebSocketResponse, kind: str, timeout: float = 5.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while True:
-        message = json.loads((await ws.receive(timeout=max(0.01, deadline - time.monotonic()))).data)
-        if message["type"] == kind:
-            return message
 
 
 async def test_a_subscription_gets_a_snapshot_then_only_changes_at_most_rate_per_second(plant: Plant) -> None:

@@ -18,11 +18,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import aiohttp
 import pytest
 import pytest_asyncio
 
-from hmi_support import Plant, http_client, http_login, post_command, strict_json, wait_until
+from hmi_support import Plant, http_client, http_login, post_command, receive_until, strict_json, wait_until
 from hmi_supervisory_support import start_supervisory_plant
 from softplc.commands import CommandCall, Permission
 
@@ -211,25 +210,16 @@ async def test_history_reads_go_through_the_door(plant: Plant) -> None:
     assert status == 422 and "nope" in body["error"]
 
 
-async def receive(ws: aiohttp.ClientWebSocketResponse, kind: str, timeout: float = 5.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while True:
-        message = await ws.receive(timeout=max(0.01, deadline - time.monotonic()))
-        data = strict_json(message.data)
-        if data["type"] == kind:
-            return data
-
-
 async def test_the_live_channel_sends_an_alarm_snapshot_then_the_changes(plant: Plant) -> None:
     await raise_alarm(plant)
     async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
         await ws.send_str(json.dumps({"type": "alarms", "on": True}))
-        snapshot = await receive(ws, "alarms")
+        snapshot = await receive_until(ws, "alarms")
         assert snapshot["snapshot"] is True
         assert [alarm["name"] for alarm in snapshot["alarms"]] == ["t01_input_full"]
         assert snapshot["summary"]["most_severe_unacknowledged"]["name"] == "t01_input_full"
         plant.drive(t01_iBM=100)  # hi → hihi: re-alarmed as critical
-        update = await receive(ws, "alarms")
+        update = await receive_until(ws, "alarms")
         assert "snapshot" not in update
         assert [(t["alarm"], t["transition"], t["state"], t["priority"]) for t in update["transitions"]] == [
             ("t01_input_full", "realarmed", "unacknowledged", "critical")]
@@ -237,7 +227,7 @@ async def test_the_live_channel_sends_an_alarm_snapshot_then_the_changes(plant: 
         await clear_alarms(plant)
         names: dict[str, str] = {}
         while names.get("t01_input_full") != "normal":
-            update = await receive(ws, "alarms")
+            update = await receive_until(ws, "alarms")
             names.update({alarm["name"]: alarm["state"] for alarm in update["alarms"]})
         assert update["summary"]["active"] == 0
 
@@ -245,7 +235,7 @@ async def test_the_live_channel_sends_an_alarm_snapshot_then_the_changes(plant: 
 async def test_a_flood_of_transitions_comes_rate_limited_and_complete(plant: Plant) -> None:
     async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
         await ws.send_str(json.dumps({"type": "alarms", "on": True}))
-        await receive(ws, "alarms")
+        await receive_until(ws, "alarms")
         started = time.monotonic()
         for index in range(60):  # a transition every ~10 ms (comments are journaled and published at once)
             await plant.runtime.commands.call("alarms.comment", {"alarm": "flag_on", "comment": f"note {index}"}, "test")
@@ -274,7 +264,7 @@ async def test_a_runtime_without_alarms_has_no_alarm_pages_and_says_so_on_the_li
                 assert (await response.json())["banners"] == []
             async with session.ws_connect(plain.url + "api/live") as ws:
                 await ws.send_str(json.dumps({"type": "alarms", "on": True}))
-                assert (await receive(ws, "error"))["message"] == "this runtime has no alarms"
+                assert (await receive_until(ws, "error"))["message"] == "this runtime has no alarms"
             async with session.get(plain.url + "api/alarms/journal.csv") as response:
                 assert response.status == 404
     finally:

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
-import time
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -20,7 +18,7 @@ import aiohttp
 import pytest
 import pytest_asyncio
 
-from hmi_support import Plant, http_client, http_login, post_command, start_plant, wait_until
+from hmi_support import Plant, http_client, http_login, post_command, receive_until, start_plant, wait_until
 from softplc.commands import CommandCall
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
@@ -41,14 +39,6 @@ async def call(session: aiohttp.ClientSession, url: str, csrf: str | None, name:
     # the result (200) or the refusal's words and details.
     assert body["ok"] is (status == 200) and body["command"] == name, body
     return (status, body["result"]) if body["ok"] else (status, {key: body[key] for key in ("error", "details") if key in body})
-
-
-async def receive_until(ws: Any, predicate: Any, timeout: float = 5.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while True:
-        message = json.loads((await ws.receive(timeout=max(0.01, deadline - time.monotonic()))).data)
-        if predicate(message):
-            return message
 
 
 async def test_an_engineer_forces_and_the_forced_mark_travels_with_the_live_value(plant: Plant) -> None:
