@@ -18,6 +18,14 @@ from concurrent.futures import ThreadPoolExecutor
 SWITCH_INTERVAL = 0.0005  # seconds a thread may hold the GIL while the loop thread waits for it
 
 
+def shorten_switch_interval() -> None:
+    """Let a thread that runs Python code (a store's writer) hold the GIL at most SWITCH_INTERVAL."""
+    # With the interpreter's default 5 ms it could keep the event loop waiting for the GIL that
+    # long between its SQL calls, i.e. a late 10 ms scan. Never lengthened: --rt-priority sets the same.
+    if sys.getswitchinterval() > SWITCH_INTERVAL:
+        sys.setswitchinterval(SWITCH_INTERVAL)
+
+
 class RealtimeError(RuntimeError):
     """Real-time scheduling could not be set up; the message says why and what to do."""
 

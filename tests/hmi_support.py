@@ -7,6 +7,7 @@ are those of FIELD-NOTES. A failed browser test saves a screenshot under tests/a
 from __future__ import annotations
 
 import asyncio
+import json
 import shutil
 import textwrap
 import time
@@ -15,6 +16,9 @@ from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import aiohttp
+import pytest_asyncio
 
 from softplc.clock import RealClock
 from softplc.config import load_config
@@ -31,6 +35,7 @@ ARTIFACTS = REPO / "tests" / "artifacts" / "hmi"
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+BROWSER_TIMEOUT = 8000  # ms: a 2-core machine shared by several test runs
 PASSWORDS = {"viewer": "viewer-pass-1", "operator": "operator-pass-1", "engineer": "engineer-pass-1"}
 TEST_HASH_COST = 10  # log2 N: milliseconds per login instead of the default's ~0.4 s
 SCRIPT_DESCRIPTION = '<script>window.__pwned = 1</script><img src=x onerror="window.__pwned = 2"> a <b>bold</b> claim'
@@ -259,6 +264,84 @@ async def wait_until(condition: Callable[[], Any], timeout: float = 5.0, message
 
 def chromium_available() -> bool:
     return Path(CHROMIUM).exists() and shutil.which("chromium") is not None
+
+
+def http_client() -> aiohttp.ClientSession:
+    """An HTTP client that keeps its cookies (the session) as a browser would."""
+    # unsafe=True: aiohttp's cookie jar ignores cookies of IP-address hosts (127.0.0.1) otherwise.
+    return aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True))
+
+
+async def http_login(session: aiohttp.ClientSession, url: str, user: str) -> str:
+    """Log `session` in as `user` through POST /api/login; returns the CSRF token."""
+    async with session.post(url + "api/login", json={"user": user, "password": PASSWORDS[user]}) as response:
+        assert response.status == 200, await response.text()
+        return (await response.json())["csrf"]
+
+
+async def post_command(session: aiohttp.ClientSession, url: str, name: str, arguments: Any = None, csrf: str | None = None,
+                       **headers: str) -> tuple[int, Any]:
+    """POST /api/commands/NAME with `arguments` as JSON; returns (status, the whole answer read as strict JSON)."""
+    sent = {"X-CSRF-Token": csrf} if csrf else {}
+    data = json.dumps(arguments if arguments is not None else {})
+    async with session.post(url + f"api/commands/{name}", data=data, headers={"Content-Type": "application/json", **sent, **headers}) as response:
+        return response.status, strict_json(await response.text())
+
+
+async def receive_until(ws: aiohttp.ClientWebSocketResponse, wanted: str | Callable[[dict[str, Any]], bool],
+                        timeout: float = 5.0) -> dict[str, Any]:
+    """The next live-channel message of type `wanted` (or for which `wanted(message)` is true), read as strict JSON."""
+    deadline = time.monotonic() + timeout
+    while True:
+        message = strict_json((await ws.receive(timeout=max(0.01, deadline - time.monotonic()))).data)
+        if (message["type"] == wanted) if isinstance(wanted, str) else wanted(message):
+            return message
+
+
+def strict_json(text: str) -> Any:
+    """JSON as a browser's JSON.parse reads it: NaN and Infinity are errors (Python's json accepts them)."""
+    def refuse(constant: str) -> Any:
+        raise ValueError(f"{constant} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+@pytest_asyncio.fixture(loop_scope="module", scope="module")
+async def browser() -> AsyncIterator[Any]:
+    """Debian's Chromium for a test module (import this fixture into the module that uses it)."""
+    from playwright.async_api import async_playwright
+
+    async with async_playwright() as playwright:
+        browser = await playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield browser
+        await browser.close()
+
+
+async def open_page(browser: Any, url: str, *, width: int = 1280, height: int = 800) -> tuple[Any, Any, list[str]]:
+    """A fresh context (no cookies) and page at `url`; returns (context, page, console errors)."""
+    context = await browser.new_context(viewport={"width": width, "height": height})
+    page = await context.new_page()
+    page.set_default_timeout(BROWSER_TIMEOUT)
+    errors: list[str] = []
+    page.on("console", lambda message: errors.append(message.text) if message.type == "error" else None)
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    await page.goto(url)
+    return context, page, errors
+
+
+async def ready(page: Any) -> None:
+    """Wait until the HMI has drawn its page."""
+    await page.wait_for_selector("main[data-ready='1']")
+
+
+async def log_in(page: Any, user: str) -> None:
+    """Log in as `user` (viewer, operator or engineer) through the login dialog; the page is drawn again."""
+    await page.click("#user-box button")
+    await page.fill("#login-user", user)
+    await page.fill("#login-password", PASSWORDS[user])
+    await page.click("dialog form button[type=submit]")
+    await page.wait_for_selector(f"#user-box .who[data-role='{user}']")
+    await ready(page)
 
 
 @asynccontextmanager

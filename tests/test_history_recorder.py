@@ -153,6 +153,14 @@ def test_problems_in_the_history_section_are_located(make_config) -> None:
     ])
 
 
+def test_a_partition_of_zero_is_refused_like_the_audit_trails(make_config) -> None:
+    from softplc.yamlsource import ConfigError
+
+    with pytest.raises(ConfigError) as raised:  # a store cut into partitions of 0 s could hold no row
+        make_config("version: 1\ntags:\n  level: {type: float64}\nhistory:\n  partition: 0\n  record: [{tags: level}]\n")
+    assert [p.message for p in raised.value.problems] == ["partition must be a whole number of hours (e.g. 24h, 1d, 1w), not 0"]
+
+
 def test_rules_merge_in_order_and_a_tags_own_rule_comes_last(make_config) -> None:
     from softplc.history.settings import HistorySettings, tag_rule
 

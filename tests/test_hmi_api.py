@@ -18,7 +18,7 @@ import aiohttp
 import pytest
 import pytest_asyncio
 
-from hmi_support import DRIVER, PASSWORDS, Plant, start_plant, wait_until
+from hmi_support import DRIVER, PASSWORDS, Plant, http_client, http_login, receive_until, start_plant, wait_until
 from softplc.tagdb import Rule, WriteEvent, WriteRejected
 from softplc.tags import Quality
 
@@ -34,17 +34,6 @@ async def plant(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Plant
     await plant.stop()
 
 
-def client() -> aiohttp.ClientSession:
-    # unsafe=True: aiohttp's cookie jar ignores cookies of IP-address hosts (127.0.0.1) otherwise.
-    return aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True))
-
-
-async def login(session: aiohttp.ClientSession, url: str, user: str) -> str:
-    async with session.post(url + "api/login", json={"user": user, "password": PASSWORDS[user]}) as response:
-        assert response.status == 200, await response.text()
-        return (await response.json())["csrf"]
-
-
 async def write(session: aiohttp.ClientSession, url: str, csrf: str | None, tag: str, value: Any, **headers: str) -> tuple[int, dict[str, Any]]:
     sent = {"X-CSRF-Token": csrf} if csrf else {}
     async with session.post(url + "api/write", json={"tag": tag, "value": value}, headers={**sent, **headers}) as response:
@@ -52,7 +41,7 @@ async def write(session: aiohttp.ClientSession, url: str, csrf: str | None, tag:
 
 
 async def test_login_sets_an_httponly_samesite_cookie_and_the_role(plant: Plant) -> None:
-    async with client() as session:
+    async with http_client() as session:
         async with session.post(plant.url + "api/login", json={"user": "operator", "password": PASSWORDS["operator"]}) as response:
             assert response.status == 200
             body = await response.json()
@@ -66,7 +55,7 @@ async def test_login_sets_an_httponly_samesite_cookie_and_the_role(plant: Plant)
 
 
 async def test_wrong_password_is_refused_without_saying_which_part_was_wrong(plant: Plant) -> None:
-    async with client() as session:
+    async with http_client() as session:
         for user in ("operator", "nobody"):
             async with session.post(plant.url + "api/login", json={"user": user, "password": "wrong-password"}) as response:
                 assert response.status == 401
@@ -74,14 +63,14 @@ async def test_wrong_password_is_refused_without_saying_which_part_was_wrong(pla
 
 
 async def test_login_needs_json_so_a_form_of_another_site_cannot_post_it(plant: Plant) -> None:
-    async with client() as session:
+    async with http_client() as session:
         async with session.post(plant.url + "api/login", data={"user": "operator", "password": PASSWORDS["operator"]}) as response:
             assert response.status == 415
 
 
 async def test_a_write_without_the_csrf_token_is_refused_and_reported(plant: Plant) -> None:
-    async with client() as session:
-        csrf = await login(session, plant.url, "operator")
+    async with http_client() as session:
+        csrf = await http_login(session, plant.url, "operator")
         before = plant.db.value("limit")
         for token in (None, "not-the-token"):
             status, body = await write(session, plant.url, token, "limit", 55.0)
@@ -108,8 +97,8 @@ async def test_roles_decide_what_may_be_written_with_the_cores_rules_and_message
         ("operator", "limt", 1.0, "unknown tag"),
     ]
     for user, tag, value, rule in cases:
-        async with client() as session:
-            csrf = await login(session, plant.url, user)
+        async with http_client() as session:
+            csrf = await http_login(session, plant.url, user)
             status, body = await write(session, plant.url, csrf, tag, value)
         result = body["results"][0]
         if rule is None:
@@ -117,8 +106,8 @@ async def test_roles_decide_what_may_be_written_with_the_cores_rules_and_message
         else:
             assert status == 422 and result["rule"] == rule, (user, tag, body)
     # The messages are the tag database's own (the same as OPC UA and Modbus give).
-    async with client() as session:
-        csrf = await login(session, plant.url, "operator")
+    async with http_client() as session:
+        csrf = await http_login(session, plant.url, "operator")
         _, body = await write(session, plant.url, csrf, "limit", 1000.0)
         with pytest.raises(WriteRejected) as core:
             plant.db.validate("limit", 1000.0)
@@ -128,7 +117,7 @@ async def test_roles_decide_what_may_be_written_with_the_cores_rules_and_message
 
 
 async def test_an_anonymous_visitor_cannot_write_and_the_attempt_is_reported(plant: Plant) -> None:
-    async with client() as session:
+    async with http_client() as session:
         status, body = await write(session, plant.url, None, "limit", 3.0)
     assert status == 403 and body["results"][0]["rule"] == "access denied"
     event = plant.writes[-1]
@@ -136,8 +125,8 @@ async def test_an_anonymous_visitor_cannot_write_and_the_attempt_is_reported(pla
 
 
 async def test_a_write_from_another_origin_is_refused(plant: Plant) -> None:
-    async with client() as session:
-        csrf = await login(session, plant.url, "operator")
+    async with http_client() as session:
+        csrf = await http_login(session, plant.url, "operator")
         status, body = await write(session, plant.url, csrf, "limit", 4.0, Origin="http://evil.example")
         assert status == 403 and "cross-origin" in body["error"]
         status, _ = await write(session, plant.url, csrf, "limit", 4.0, Origin=plant.url.rstrip("/"))
@@ -146,7 +135,7 @@ async def test_a_write_from_another_origin_is_refused(plant: Plant) -> None:
 
 async def test_a_rebound_host_name_is_refused(plant: Plant) -> None:
     """DNS rebinding: evil.example made to resolve to 127.0.0.1 must not be served."""
-    async with client() as session:
+    async with http_client() as session:
         async with session.get(plant.url + "api/tags", headers={"Host": f"evil.example:{plant.hmi.port}"}) as response:
             assert response.status == 421
         async with session.get(plant.url + "api/session", headers={"Host": f"localhost:{plant.hmi.port}"}) as response:
@@ -154,10 +143,10 @@ async def test_a_rebound_host_name_is_refused(plant: Plant) -> None:
 
 
 async def test_tags_api_lists_declarations_values_and_what_the_role_may_write(plant: Plant) -> None:
-    async with client() as session:
+    async with http_client() as session:
         async with session.get(plant.url + "api/tags") as response:
             anonymous = {tag["name"]: tag for tag in (await response.json())["tags"]}
-        await login(session, plant.url, "operator")
+        await http_login(session, plant.url, "operator")
         async with session.get(plant.url + "api/tags?group=Tasks&q=ibm") as response:
             body = await response.json()
         async with session.get(plant.url + "api/tags/limit") as response:
@@ -172,7 +161,7 @@ async def test_tags_api_lists_declarations_values_and_what_the_role_may_write(pl
 
 
 async def test_every_answer_carries_the_security_headers(plant: Plant) -> None:
-    async with client() as session:
+    async with http_client() as session:
         for path in ("", "static/js/main.js", "api/session", "api/nothing"):
             async with session.get(plant.url + path) as response:
                 policy = response.headers["Content-Security-Policy"]
@@ -181,7 +170,7 @@ async def test_every_answer_carries_the_security_headers(plant: Plant) -> None:
 
 
 async def test_the_live_channel_refuses_another_origin(plant: Plant) -> None:
-    async with client() as session:
+    async with http_client() as session:
         with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
             await session.ws_connect(plant.url + "api/live", origin="http://evil.example")
         assert refused.value.status == 403
@@ -190,16 +179,8 @@ async def test_the_live_channel_refuses_another_origin(plant: Plant) -> None:
             assert hello["type"] == "hello" and hello["role"] == "viewer"
 
 
-async def receive_until(ws: aiohttp.ClientWebSocketResponse, kind: str, timeout: float = 5.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while True:
-        message = json.loads((await ws.receive(timeout=max(0.01, deadline - time.monotonic()))).data)
-        if message["type"] == kind:
-            return message
-
-
 async def test_a_subscription_gets_a_snapshot_then_only_changes_at_most_rate_per_second(plant: Plant) -> None:
-    async with client() as session, session.ws_connect(plant.url + "api/live") as ws:
+    async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
         await ws.send_json({"type": "subscribe", "items": ["counter", "limit", "=t01_iBM + t02_iBM", "no_such_tag"]})
         unknown = await receive_until(ws, "unknown")
         assert unknown["items"] == ["no_such_tag"]
@@ -219,7 +200,7 @@ async def test_a_subscription_gets_a_snapshot_then_only_changes_at_most_rate_per
 
 
 async def test_expressions_of_views_are_evaluated_on_the_server(plant: Plant) -> None:
-    async with client() as session, session.ws_connect(plant.url + "api/live") as ws:
+    async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
         await ws.send_json({"type": "subscribe", "items": ["=t01_iBM + t02_iBM", "=t01_iBL >= 80"]})
         await receive_until(ws, "snapshot")
         plant.drive(t01_iBM=85, t02_iBM=3)
@@ -232,7 +213,7 @@ async def test_expressions_of_views_are_evaluated_on_the_server(plant: Plant) ->
 
 
 async def test_the_quality_of_a_value_travels_with_it(plant: Plant) -> None:
-    async with client() as session, session.ws_connect(plant.url + "api/live") as ws:
+    async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
         await ws.send_json({"type": "subscribe", "items": ["r02_xpos", "=t01_iBM + t02_iBM"]})
         await receive_until(ws, "snapshot")
         plant.db.submit_quality(["r02_xpos", "t02_iBM"], Quality.BAD, DRIVER)  # a driver whose robot went away
@@ -245,7 +226,7 @@ async def test_the_quality_of_a_value_travels_with_it(plant: Plant) -> None:
 
 
 async def test_views_api_serves_the_drawing_as_an_inert_document(plant: Plant) -> None:
-    async with client() as session:
+    async with http_client() as session:
         async with session.get(plant.url + "api/views") as response:
             assert (await response.json())["views"] == [{"name": "test", "title": "Test view"}]
         async with session.get(plant.url + "api/views/test/svg") as response:
@@ -256,7 +237,7 @@ async def test_views_api_serves_the_drawing_as_an_inert_document(plant: Plant) -
 async def test_login_is_throttled_like_opc_ua_logins(tmp_path: Path) -> None:
     plant = await start_plant(tmp_path)
     try:
-        async with client() as session:
+        async with http_client() as session:
             for _ in range(5):
                 async with session.post(plant.url + "api/login", json={"user": "engineer", "password": "wrong-password"}) as response:
                     assert response.status == 401
@@ -272,7 +253,7 @@ async def test_login_is_throttled_like_opc_ua_logins(tmp_path: Path) -> None:
 async def test_with_anonymous_off_nothing_is_shown_before_logging_in(tmp_path: Path) -> None:
     plant = await start_plant(tmp_path, anonymous="off")
     try:
-        async with client() as session:
+        async with http_client() as session:
             async with session.get(plant.url + "api/session") as response:
                 assert (await response.json())["login_required"] is True
             async with session.get(plant.url + "api/tags") as response:
@@ -280,7 +261,7 @@ async def test_with_anonymous_off_nothing_is_shown_before_logging_in(tmp_path: P
             with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
                 await session.ws_connect(plant.url + "api/live")
             assert refused.value.status == 401
-            await login(session, plant.url, "viewer")
+            await http_login(session, plant.url, "viewer")
             async with session.get(plant.url + "api/tags") as response:
                 assert response.status == 200
     finally:
@@ -290,7 +271,7 @@ async def test_with_anonymous_off_nothing_is_shown_before_logging_in(tmp_path: P
 async def test_a_silent_live_client_is_dropped_after_its_heartbeats(tmp_path: Path) -> None:
     plant = await start_plant(tmp_path, heartbeat=0.3)
     try:
-        async with client() as session:
+        async with http_client() as session:
             ws = await session.ws_connect(plant.url + "api/live", autoping=False)
             await wait_until(lambda: plant.hmi.hub.dropped == 1, timeout=5, message="the silent client dropped")
             await ws.close()
@@ -304,13 +285,13 @@ async def test_tls_serves_https_with_a_certificate_made_in_the_state_directory(t
         assert plant.url.startswith("https://")
         assert (tmp_path / "state" / "hmi" / "tls" / "cert.pem").is_file()
         assert (tmp_path / "state" / "hmi" / "tls" / "key.pem").stat().st_mode & 0o077 == 0
-        async with client() as session:
+        async with http_client() as session:
             async with session.post(plant.url + "api/login", json={"user": "viewer", "password": PASSWORDS["viewer"]}, ssl=False) as response:
                 assert response.status == 200
                 cookie = response.headers["Set-Cookie"]
         assert cookie.startswith(f"__Host-softplc_hmi_{plant.hmi.port}=") and "Secure" in cookie
         with pytest.raises(aiohttp.ClientError):
-            async with client() as session, session.get(plant.url.replace("https://", "http://") + "api/session") as response:
+            async with http_client() as session, session.get(plant.url.replace("https://", "http://") + "api/session") as response:
                 await response.read()
     finally:
         await plant.stop()

@@ -15,23 +15,14 @@ from typing import Any
 import pytest
 import pytest_asyncio
 
-from hmi_support import (ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, PASSWORDS, SCRIPT_DESCRIPTION, Plant, chromium_available,
-                         plant_yaml, screenshot_on_failure, start_plant, wait_until)
+from hmi_support import (ARTIFACTS, SCRIPT_DESCRIPTION, Plant, browser, chromium_available, log_in, open_page, plant_yaml,  # noqa: F401 (browser: a fixture)
+                         ready, screenshot_on_failure, start_plant, wait_until)
 
-playwright_api = pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
+pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
 if not chromium_available():
     pytest.skip("Debian's chromium is not installed (scripts/install-test-tools.sh)", allow_module_level=True)
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
-TIMEOUT = 8000  # ms: a 2-core machine shared by several test runs
-
-
-@pytest_asyncio.fixture(loop_scope="module", scope="module")
-async def browser() -> AsyncIterator[Any]:
-    async with playwright_api.async_playwright() as playwright:
-        browser = await playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield browser
-        await browser.close()
 
 
 @pytest_asyncio.fixture(loop_scope="module", scope="module")
@@ -39,30 +30,6 @@ async def plant(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Plant
     plant = await start_plant(tmp_path_factory.mktemp("hmi-browser"), modbus=True, opcua=True)
     yield plant
     await plant.stop()
-
-
-async def open_page(browser: Any, url: str, *, width: int = 1280, height: int = 800) -> tuple[Any, Any, list[str]]:
-    """A fresh context (no cookies) and page at `url`; returns (context, page, console errors)."""
-    context = await browser.new_context(viewport={"width": width, "height": height})
-    page = await context.new_page()
-    page.set_default_timeout(TIMEOUT)
-    errors: list[str] = []
-    page.on("console", lambda message: errors.append(message.text) if message.type == "error" else None)
-    page.on("pageerror", lambda error: errors.append(str(error)))
-    await page.goto(url)
-    return context, page, errors
-
-
-async def ready(page: Any) -> None:
-    await page.wait_for_selector("main[data-ready='1']")
-
-
-async def log_in(page: Any, user: str) -> None:
-    await page.click("#user-box button")
-    await page.fill("#login-user", user)
-    await page.fill("#login-password", PASSWORDS[user])
-    await page.click("dialog form button[type=submit]")
-    await page.wait_for_selector(f"#user-box .who[data-role='{user}']")
 
 
 async def test_robot_markers_follow_their_position_tags(browser: Any, plant: Plant) -> None:

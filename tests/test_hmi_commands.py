@@ -18,11 +18,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import aiohttp
 import pytest
 import pytest_asyncio
 
-from hmi_support import PASSWORDS, Plant, wait_until
+from hmi_support import Plant, http_client, http_login, post_command, receive_until, strict_json, wait_until
 from hmi_supervisory_support import start_supervisory_plant
 from softplc.commands import CommandCall, Permission
 
@@ -36,32 +35,6 @@ async def plant(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Plant
     plant.runtime.commands.on_call(plant.calls.append)
     yield plant
     await plant.stop()
-
-
-def client() -> aiohttp.ClientSession:
-    return aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True))  # keep cookies of 127.0.0.1
-
-
-async def login(session: aiohttp.ClientSession, url: str, user: str) -> str:
-    async with session.post(url + "api/login", json={"user": user, "password": PASSWORDS[user]}) as response:
-        assert response.status == 200, await response.text()
-        return (await response.json())["csrf"]
-
-
-async def command(session: aiohttp.ClientSession, url: str, name: str, arguments: Any = None, csrf: str | None = None,
-                  **headers: str) -> tuple[int, dict[str, Any]]:
-    sent = {"X-CSRF-Token": csrf} if csrf else {}
-    data = json.dumps(arguments if arguments is not None else {})
-    async with session.post(url + f"api/commands/{name}", data=data, headers={"Content-Type": "application/json", **sent, **headers}) as response:
-        return response.status, strict_json(await response.text())
-
-
-def strict_json(text: str) -> Any:
-    """JSON as a browser's JSON.parse reads it: NaN and Infinity are errors (Python's json accepts them)."""
-    def refuse(constant: str) -> Any:
-        raise ValueError(f"{constant} is not JSON")
-
-    return json.loads(text, parse_constant=refuse)
 
 
 def state(plant: Plant, alarm: str) -> str:
@@ -81,14 +54,14 @@ async def clear_alarms(plant: Plant) -> None:
 
 async def test_an_operator_acknowledges_through_the_door_and_the_journal_says_who(plant: Plant) -> None:
     await raise_alarm(plant)
-    async with client() as session:
-        csrf = await login(session, plant.url, "operator")
-        status, body = await command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full", "comment": "on it"}, csrf)
+    async with http_client() as session:
+        csrf = await http_login(session, plant.url, "operator")
+        status, body = await post_command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full", "comment": "on it"}, csrf)
         assert status == 200, body
         assert body["ok"] is True and body["result"] == "acknowledged t01_input_full (now acknowledged)"
         assert isinstance(body["time"], float)
         assert state(plant, "t01_input_full") == "acknowledged"
-        status, body = await command(session, plant.url, "alarms.journal", {"alarm": "t01_input_full", "transition": "acknowledged", "limit": 1})
+        status, body = await post_command(session, plant.url, "alarms.journal", {"alarm": "t01_input_full", "transition": "acknowledged", "limit": 1})
         assert status == 200
         (row,) = body["result"]
         assert (row["user"], row["role"], row["origin"], row["comment"]) == ("operator", "operator", "hmi:operator@127.0.0.1", "on it")
@@ -99,15 +72,15 @@ async def test_an_operator_acknowledges_through_the_door_and_the_journal_says_wh
 
 async def test_a_viewer_is_refused_with_403_and_the_refusal_is_reported(plant: Plant) -> None:
     await raise_alarm(plant)
-    async with client() as session:
-        csrf = await login(session, plant.url, "viewer")
-        status, body = await command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"}, csrf)
+    async with http_client() as session:
+        csrf = await http_login(session, plant.url, "viewer")
+        status, body = await post_command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"}, csrf)
         assert status == 403
         assert body == {"ok": False, "command": "alarms.acknowledge", "error": "role viewer may not acknowledge alarms"}
-        status, body = await command(session, plant.url, "alarms.shelve", {"alarm": "t01_input_full", "reason": "x", "duration": 60}, csrf)
+        status, body = await post_command(session, plant.url, "alarms.shelve", {"alarm": "t01_input_full", "reason": "x", "duration": 60}, csrf)
         assert status == 403 and body["error"] == "role viewer may not shelve alarms"
         # Reading is open to a viewer.
-        status, body = await command(session, plant.url, "alarms.list", {"state": "unacknowledged"})
+        status, body = await post_command(session, plant.url, "alarms.list", {"state": "unacknowledged"})
         assert status == 200 and [alarm["name"] for alarm in body["result"]] == ["t01_input_full"]
     assert state(plant, "t01_input_full") == "unacknowledged"
     refused = [call for call in plant.calls if call.origin.user == "viewer"]
@@ -117,37 +90,37 @@ async def test_a_viewer_is_refused_with_403_and_the_refusal_is_reported(plant: P
 
 async def test_state_changing_commands_need_a_login_and_the_csrf_token(plant: Plant) -> None:
     await raise_alarm(plant)
-    async with client() as session:
-        status, body = await command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"})
+    async with http_client() as session:
+        status, body = await post_command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"})
         assert status == 403 and body["error"] == "log in to acknowledge alarms"  # the anonymous viewer
-        csrf = await login(session, plant.url, "operator")
-        status, body = await command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"})
+        csrf = await http_login(session, plant.url, "operator")
+        status, body = await post_command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"})
         assert status == 403 and body["error"] == "missing or wrong CSRF token (X-CSRF-Token)"
-        status, body = await command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"}, "forged-token")
+        status, body = await post_command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"}, "forged-token")
         assert status == 403 and "CSRF" in body["error"]
-        status, _ = await command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"}, csrf, Origin="http://evil.example")
+        status, _ = await post_command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"}, csrf, Origin="http://evil.example")
         assert status == 403  # another site's page, even with the token
         assert state(plant, "t01_input_full") == "unacknowledged"
-    async with client() as session:  # commands that only read need no token: the anonymous viewer may look
-        status, body = await command(session, plant.url, "alarms.summary")
+    async with http_client() as session:  # commands that only read need no token: the anonymous viewer may look
+        status, body = await post_command(session, plant.url, "alarms.summary")
         assert status == 200 and body["result"]["unacknowledged"] == 1
     await clear_alarms(plant)
 
 
 async def test_unknown_commands_bad_arguments_and_other_refusals_say_what_is_wrong(plant: Plant) -> None:
-    async with client() as session:
-        csrf = await login(session, plant.url, "operator")
-        status, body = await command(session, plant.url, "alarms.acknowlege", {"alarm": "x"}, csrf)
+    async with http_client() as session:
+        csrf = await http_login(session, plant.url, "operator")
+        status, body = await post_command(session, plant.url, "alarms.acknowlege", {"alarm": "x"}, csrf)
         assert status == 404 and body["error"] == "no such command 'alarms.acknowlege' (did you mean 'alarms.acknowledge'?)"
-        status, body = await command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"}, csrf)
+        status, body = await post_command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_full"}, csrf)
         assert status == 422 and body["error"] == "alarm t01_input_full needs no acknowledgement: it is normal"
-        status, body = await command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_ful"}, csrf)
+        status, body = await post_command(session, plant.url, "alarms.acknowledge", {"alarm": "t01_input_ful"}, csrf)
         assert status == 422 and body["error"] == "no alarm named 't01_input_ful' (did you mean 't01_input_full'?)"
-        status, body = await command(session, plant.url, "alarms.shelve", {"alarm": "t01_input_full", "reason": " ", "duration": 60}, csrf)
+        status, body = await post_command(session, plant.url, "alarms.shelve", {"alarm": "t01_input_full", "reason": " ", "duration": 60}, csrf)
         assert status == 422 and body["error"] == "shelving t01_input_full needs a reason"
-        status, body = await command(session, plant.url, "alarms.list", {"sate": "all"})
+        status, body = await post_command(session, plant.url, "alarms.list", {"sate": "all"})
         assert status == 422 and body["error"].startswith("alarms.list: unknown argument 'sate'")
-        status, body = await command(session, plant.url, "alarms.list", ["all"])
+        status, body = await post_command(session, plant.url, "alarms.list", ["all"])
         assert status == 400 and body["error"] == 'the arguments are a JSON object ({"name": value, ...}), not an array'
         async with session.post(plant.url + "api/commands/alarms.list", data=b"{oops", headers={"X-CSRF-Token": csrf}) as response:
             assert response.status == 400
@@ -173,8 +146,8 @@ async def test_results_are_strict_json_whatever_a_command_returns(plant: Plant) 
 
     undo = plant.runtime.commands.register("test.odd", odd, permission=Permission.VIEW)
     try:
-        async with client() as session:
-            status, body = await command(session, plant.url, "test.odd")
+        async with http_client() as session:
+            status, body = await post_command(session, plant.url, "test.odd")
         assert status == 200
         assert body["result"] == {"nan": "NaN", "inf": ["Infinity", "-Infinity"], "tuple": [1, 2.5], "enum": "red",
                                   "point": {"x": "NaN", "colour": "red"}, "set": ["only"], "red": "enum key", "path": "/plant/x"}
@@ -183,10 +156,10 @@ async def test_results_are_strict_json_whatever_a_command_returns(plant: Plant) 
 
 
 async def test_the_list_of_commands_says_what_the_role_may_call(plant: Plant) -> None:
-    async with client() as session:
+    async with http_client() as session:
         async with session.get(plant.url + "api/commands") as response:
             anonymous = {row["name"]: row for row in (await response.json())["commands"]}
-        await login(session, plant.url, "operator")
+        await http_login(session, plant.url, "operator")
         async with session.get(plant.url + "api/commands") as response:
             operator = {row["name"]: row["allowed"] for row in (await response.json())["commands"]}
     assert anonymous["alarms.acknowledge"]["allowed"] is False and anonymous["alarms.list"]["allowed"] is True
@@ -197,9 +170,9 @@ async def test_the_list_of_commands_says_what_the_role_may_call(plant: Plant) ->
 
 async def test_the_journal_downloads_as_csv_with_its_filters(plant: Plant) -> None:
     await raise_alarm(plant, "t02")
-    async with client() as session:
-        csrf = await login(session, plant.url, "operator")
-        status, _ = await command(session, plant.url, "alarms.comment", {"alarm": "t02_input_full", "comment": "a, \"quoted\" note"}, csrf)
+    async with http_client() as session:
+        csrf = await http_login(session, plant.url, "operator")
+        status, _ = await post_command(session, plant.url, "alarms.comment", {"alarm": "t02_input_full", "comment": "a, \"quoted\" note"}, csrf)
         assert status == 200
         async with session.get(plant.url + "api/alarms/journal.csv", params={"alarm": "t02*", "transition": "commented,acknowledged"}) as response:
             assert response.status == 200
@@ -222,8 +195,8 @@ async def test_history_reads_go_through_the_door(plant: Plant) -> None:
     wall = plant.runtime.clock.wall
 
     async def plotted() -> list[float]:
-        async with client() as session:
-            status, body = await command(session, plant.url, "history.plot", {"tag": "speed", "start": wall() - 60, "end": wall() + 1})
+        async with http_client() as session:
+            status, body = await post_command(session, plant.url, "history.plot", {"tag": "speed", "start": wall() - 60, "end": wall() + 1})
         assert status == 200, body
         return [sample["value"] for sample in body["result"]["samples"]]
 
@@ -232,30 +205,21 @@ async def test_history_reads_go_through_the_door(plant: Plant) -> None:
         assert time.monotonic() < deadline, "recorded values not readable"
         await asyncio.sleep(0.1)
     assert {1.5, 2.5} <= set(await plotted())
-    async with client() as session:
-        status, body = await command(session, plant.url, "history.plot", {"tag": "nope", "start": 0, "end": 1})
+    async with http_client() as session:
+        status, body = await post_command(session, plant.url, "history.plot", {"tag": "nope", "start": 0, "end": 1})
     assert status == 422 and "nope" in body["error"]
-
-
-async def receive(ws: aiohttp.ClientWebSocketResponse, kind: str, timeout: float = 5.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while True:
-        message = await ws.receive(timeout=max(0.01, deadline - time.monotonic()))
-        data = strict_json(message.data)
-        if data["type"] == kind:
-            return data
 
 
 async def test_the_live_channel_sends_an_alarm_snapshot_then_the_changes(plant: Plant) -> None:
     await raise_alarm(plant)
-    async with client() as session, session.ws_connect(plant.url + "api/live") as ws:
+    async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
         await ws.send_str(json.dumps({"type": "alarms", "on": True}))
-        snapshot = await receive(ws, "alarms")
+        snapshot = await receive_until(ws, "alarms")
         assert snapshot["snapshot"] is True
         assert [alarm["name"] for alarm in snapshot["alarms"]] == ["t01_input_full"]
         assert snapshot["summary"]["most_severe_unacknowledged"]["name"] == "t01_input_full"
         plant.drive(t01_iBM=100)  # hi → hihi: re-alarmed as critical
-        update = await receive(ws, "alarms")
+        update = await receive_until(ws, "alarms")
         assert "snapshot" not in update
         assert [(t["alarm"], t["transition"], t["state"], t["priority"]) for t in update["transitions"]] == [
             ("t01_input_full", "realarmed", "unacknowledged", "critical")]
@@ -263,15 +227,15 @@ async def test_the_live_channel_sends_an_alarm_snapshot_then_the_changes(plant: 
         await clear_alarms(plant)
         names: dict[str, str] = {}
         while names.get("t01_input_full") != "normal":
-            update = await receive(ws, "alarms")
+            update = await receive_until(ws, "alarms")
             names.update({alarm["name"]: alarm["state"] for alarm in update["alarms"]})
         assert update["summary"]["active"] == 0
 
 
 async def test_a_flood_of_transitions_comes_rate_limited_and_complete(plant: Plant) -> None:
-    async with client() as session, session.ws_connect(plant.url + "api/live") as ws:
+    async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
         await ws.send_str(json.dumps({"type": "alarms", "on": True}))
-        await receive(ws, "alarms")
+        await receive_until(ws, "alarms")
         started = time.monotonic()
         for index in range(60):  # a transition every ~10 ms (comments are journaled and published at once)
             await plant.runtime.commands.call("alarms.comment", {"alarm": "flag_on", "comment": f"note {index}"}, "test")
@@ -295,12 +259,12 @@ async def test_a_runtime_without_alarms_has_no_alarm_pages_and_says_so_on_the_li
     plain = await start_plant(tmp_path)
     try:
         assert [page.id for page in plain.hmi.shell.pages if page.id in ("alarms", "journal", "trends")] == []
-        async with client() as session:
+        async with http_client() as session:
             async with session.get(plain.url + "api/session") as response:
                 assert [banner for banner in (await response.json())["banners"] if "alarm" in banner] == []  # the forced banner stays
             async with session.ws_connect(plain.url + "api/live") as ws:
                 await ws.send_str(json.dumps({"type": "alarms", "on": True}))
-                assert (await receive(ws, "error"))["message"] == "this runtime has no alarms"
+                assert (await receive_until(ws, "error"))["message"] == "this runtime has no alarms"
             async with session.get(plain.url + "api/alarms/journal.csv") as response:
                 assert response.status == 404
     finally:

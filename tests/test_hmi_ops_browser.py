@@ -18,16 +18,16 @@ from typing import Any
 import pytest
 import pytest_asyncio
 
-from hmi_support import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, PASSWORDS, Plant, chromium_available, plant_yaml, screenshot_on_failure, start_plant, wait_until
+from hmi_support import (ARTIFACTS, Plant, browser, chromium_available, log_in, open_page, plant_yaml, ready,  # noqa: F401 (browser: a fixture)
+                         screenshot_on_failure, start_plant, wait_until)
 from softplc.roles import Role
 from softplc.tagdb import Origin
 
-playwright_api = pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
+pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
 if not chromium_available():
     pytest.skip("Debian's chromium is not installed (scripts/install-test-tools.sh)", allow_module_level=True)
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
-TIMEOUT = 8000  # ms: a 2-core machine shared by several test runs
 ENGINEER = Origin("test", "erin", role=Role.ENGINEER)
 
 TICKER = '''
@@ -59,14 +59,6 @@ def ops_plant() -> str:
 
 
 @pytest_asyncio.fixture(loop_scope="module", scope="module")
-async def browser() -> AsyncIterator[Any]:
-    async with playwright_api.async_playwright() as playwright:
-        browser = await playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield browser
-        await browser.close()
-
-
-@pytest_asyncio.fixture(loop_scope="module", scope="module")
 async def plant(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Plant]:
     from softplc.audit.recorder import AuditRecorder
     from softplc.audit.settings import AuditSettings
@@ -80,32 +72,9 @@ async def plant(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Plant
     await plant.stop()
 
 
-async def open_page(browser: Any, url: str, *, width: int = 1280, height: int = 800) -> tuple[Any, Any, list[str]]:
-    context = await browser.new_context(viewport={"width": width, "height": height})
-    page = await context.new_page()
-    page.set_default_timeout(TIMEOUT)
-    errors: list[str] = []
-    page.on("console", lambda message: errors.append(message.text) if message.type == "error" else None)
-    page.on("pageerror", lambda error: errors.append(str(error)))
-    await page.goto(url)
-    return context, page, errors
-
-
 def unexpected(errors: list[str]) -> list[str]:
     """Console errors but the browser's note of an answer the test expected to be a refusal (403, 422)."""
     return [error for error in errors if not error.startswith("Failed to load resource: the server responded with a status of 4")]
-
-
-async def ready(page: Any) -> None:
-    await page.wait_for_selector("main[data-ready='1']")
-
-
-async def log_in(page: Any, user: str) -> None:
-    await page.click("#user-box button")
-    await page.fill("#login-user", user)
-    await page.fill("#login-password", PASSWORDS[user])
-    await page.click("dialog form button[type=submit]")
-    await page.wait_for_selector(f"#user-box .who[data-role='{user}']")
 
 
 async def visible(page: Any, selector: str) -> bool:

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
-import time
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -20,7 +18,7 @@ import aiohttp
 import pytest
 import pytest_asyncio
 
-from hmi_support import PASSWORDS, Plant, start_plant, wait_until
+from hmi_support import Plant, http_client, http_login, post_command, receive_until, start_plant, wait_until
 from softplc.commands import CommandCall
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
@@ -35,41 +33,20 @@ async def plant(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Plant
     await plant.stop()
 
 
-def client() -> aiohttp.ClientSession:
-    return aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True))  # keep cookies of 127.0.0.1
-
-
-async def login(session: aiohttp.ClientSession, url: str, user: str) -> str:
-    async with session.post(url + "api/login", json={"user": user, "password": PASSWORDS[user]}) as response:
-        assert response.status == 200, await response.text()
-        return (await response.json())["csrf"]
-
-
 async def call(session: aiohttp.ClientSession, url: str, csrf: str | None, name: str, arguments: Any = None) -> tuple[int, Any]:
-    headers = {"X-CSRF-Token": csrf} if csrf else {}
-    body = json.dumps(arguments) if arguments is not None else None
-    async with session.post(f"{url}api/commands/{name}", data=body, headers={**headers, "Content-Type": "application/json"}) as response:
-        body = await response.json()
+    status, body = await post_command(session, url, name, arguments, csrf)
     # Every answer says whether it succeeded and which command it was; what the tests compare is
     # the result (200) or the refusal's words and details.
-    assert body["ok"] is (response.status == 200) and body["command"] == name, body
-    return (response.status, body["result"]) if body["ok"] else (response.status, {key: body[key] for key in ("error", "details") if key in body})
-
-
-async def receive_until(ws: Any, predicate: Any, timeout: float = 5.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while True:
-        message = json.loads((await ws.receive(timeout=max(0.01, deadline - time.monotonic()))).data)
-        if predicate(message):
-            return message
+    assert body["ok"] is (status == 200) and body["command"] == name, body
+    return (status, body["result"]) if body["ok"] else (status, {key: body[key] for key in ("error", "details") if key in body})
 
 
 async def test_an_engineer_forces_and_the_forced_mark_travels_with_the_live_value(plant: Plant) -> None:
-    async with client() as session, session.ws_connect(plant.url + "api/live") as ws:
+    async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
         await ws.send_json({"type": "subscribe", "items": ["limit", "flag"]})
         snapshot = await receive_until(ws, lambda m: m["type"] == "snapshot")
         assert "forced" not in snapshot
-        csrf = await login(session, plant.url, "engineer")
+        csrf = await http_login(session, plant.url, "engineer")
         status, result = await call(session, plant.url, csrf, "tags.force", {"tag": "limit", "value": "42.5"})
         assert status == 200 and result == "limit forced to 42.5 from the next cycle"
         update = await receive_until(ws, lambda m: m["type"] == "update" and "limit" in m["values"])
@@ -92,8 +69,8 @@ async def test_an_engineer_forces_and_the_forced_mark_travels_with_the_live_valu
 
 async def test_operators_viewers_and_visitors_are_refused_by_the_role_check_and_it_is_reported(plant: Plant) -> None:
     for user in ("operator", "viewer", None):
-        async with client() as session:
-            csrf = await login(session, plant.url, user) if user else None
+        async with http_client() as session:
+            csrf = await http_login(session, plant.url, user) if user else None
             before = len(plant.calls)
             status, body = await call(session, plant.url, csrf, "tags.force", {"tag": "limit", "value": 7})
             role = user or "viewer"  # a visitor who has not logged in is told to, and reported with the anonymous role
@@ -111,8 +88,8 @@ async def test_operators_viewers_and_visitors_are_refused_by_the_role_check_and_
 
 
 async def test_a_call_without_the_sessions_csrf_token_is_refused(plant: Plant) -> None:
-    async with client() as session:
-        await login(session, plant.url, "engineer")
+    async with http_client() as session:
+        await http_login(session, plant.url, "engineer")
         before = len(plant.calls)
         status, body = await call(session, plant.url, None, "tags.force", {"tag": "limit", "value": 7})
         assert status == 403 and "CSRF" in body["error"]
@@ -123,8 +100,8 @@ async def test_a_call_without_the_sessions_csrf_token_is_refused(plant: Plant) -
 
 
 async def test_refusals_come_back_in_the_runtimes_words(plant: Plant) -> None:
-    async with client() as session:
-        csrf = await login(session, plant.url, "engineer")
+    async with http_client() as session:
+        csrf = await http_login(session, plant.url, "engineer")
         status, body = await call(session, plant.url, csrf, "tags.force", {"tag": "limit", "value": 1000})
         assert status == 422 and body == {"error": "limit: out of range: 1000.0 is above the maximum 100"}
         status, body = await call(session, plant.url, csrf, "tags.unforce", {"tag": "limit"})
@@ -138,8 +115,8 @@ async def test_refusals_come_back_in_the_runtimes_words(plant: Plant) -> None:
 
 
 async def test_an_engineer_stops_and_starts_a_program(plant: Plant) -> None:
-    async with client() as session:
-        csrf = await login(session, plant.url, "engineer")
+    async with http_client() as session:
+        csrf = await http_login(session, plant.url, "engineer")
         counter = plant.db.value("counter")
         status, result = await call(session, plant.url, csrf, "programs.stop", {"program": "count"})
         assert status == 200 and result.startswith("stopped program count")
@@ -157,8 +134,8 @@ async def test_an_online_change_that_needs_a_restart_is_refused_with_its_details
     original = path.read_text()
     path.write_text(original.replace("  flag:    {type: bool}\n", "  flag:    {type: bool}\n  extra:   {type: bool}\n"))
     try:
-        async with client() as session:
-            csrf = await login(session, plant.url, "engineer")
+        async with http_client() as session:
+            csrf = await http_login(session, plant.url, "engineer")
             status, body = await call(session, plant.url, csrf, "programs.apply", {"check": True})
     finally:
         path.write_text(original)
@@ -175,14 +152,14 @@ async def test_the_audit_page_exports_csv_for_engineers_only(tmp_path: Path) -> 
     plant.runtime.adapters.insert(0, AuditRecorder(AuditSettings(section={"flush_period": "50ms"}), "hmi test plant"))
     await plant.runtime.start()
     try:
-        async with client() as session:
-            csrf = await login(session, plant.url, "operator")
+        async with http_client() as session:
+            csrf = await http_login(session, plant.url, "operator")
             async with session.post(plant.url + "api/write", json={"tag": "limit", "value": 12.5}, headers={"X-CSRF-Token": csrf}) as response:
                 assert response.status == 200
             async with session.get(plant.url + "api/audit.csv?tag=limit") as response:
                 assert response.status == 403 and "may not read the audit trail" in (await response.json())["error"]
-        async with client() as session:
-            await login(session, plant.url, "engineer")
+        async with http_client() as session:
+            await http_login(session, plant.url, "engineer")
             async with session.get(plant.url + "api/audit.csv?tag=limit&source=hmi") as response:
                 assert response.status == 200 and response.content_type == "text/csv"
                 assert response.headers["Content-Disposition"].startswith("attachment; filename=\"audit-")

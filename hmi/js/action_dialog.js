@@ -2,6 +2,7 @@
 // fields, one submit button, the runtime's answer or refusal shown in the dialog itself.
 
 import { el, clear } from './dom.js';
+import { showDialog, dialogHeading } from './dialog_box.js';
 
 /**
  * Open a form. `build(form)` returns {body: [nodes], read(): args or a string saying what is missing};
@@ -10,20 +11,19 @@ import { el, clear } from './dom.js';
  */
 export function openActionDialog({ title, intro, submitLabel, build, submit }) {
   return new Promise((resolve) => {
-    for (const open of document.querySelectorAll('dialog.dialog[open]')) open.close();
     let done = false;
+    let box = null;
     const message = el('div', { role: 'alert' });
     const go = el('button', { type: 'submit', class: 'btn', text: submitLabel });
     const cancel = el('button', { type: 'button', class: 'btn secondary', text: 'Cancel' });
     const form = el('form', { method: 'dialog', novalidate: true });
     const parts = build(form);
     form.append(
-      el('h2', {}, el('span', { text: title }), el('button', { type: 'button', class: 'close-x', 'aria-label': 'Close', text: '×', onclick: () => box.close() })),
+      dialogHeading(title, () => box.close()),
       intro ? el('p', { class: 'desc', text: intro }) : null,
       ...parts.body, message,
       el('div', { class: 'actions' }, cancel, go),
     );
-    const box = el('dialog', { class: 'dialog action-dialog' }, form);
     cancel.addEventListener('click', () => box.close());
     form.addEventListener('submit', async (event) => {
       event.preventDefault();
@@ -47,9 +47,8 @@ export function openActionDialog({ title, intro, submitLabel, build, submit }) {
         go.disabled = false;
       }
     });
-    document.body.append(box);
-    box.addEventListener('close', () => { box.remove(); resolve(done); }, { once: true });
-    box.showModal();
+    box = showDialog(form, 'action-dialog');
+    box.addEventListener('close', () => resolve(done), { once: true });
     const first = form.querySelector('input, textarea, select');
     if (first) first.focus();
   });

@@ -3,28 +3,10 @@
 
 import { el, clear, setText } from './dom.js';
 import { writeTag, post } from './api.js';
-import { formatValue, formatWithUnit, formatRange, qualityName } from './format.js';
+import { formatValue, formatWithUnit, formatExact, qualityName } from './format.js';
+import { showDialog, dialogHeading } from './dialog_box.js';
+import { tagFacts, valueEntry } from './value_entry.js';
 import { forcedMark, showForced, forceControls } from './ops/forcing.js';
-
-/** A new modal <dialog> with `node`, removed when closed (one at a time: an open one is closed). */
-function show(node, className) {
-  for (const open of document.querySelectorAll('dialog.dialog[open]')) open.close();
-  // A fresh element each time: a closing dialog's "close" event never reaches the next one's listeners.
-  const box = el('dialog', { class: `dialog ${className || ''}` }, node);
-  document.body.append(box);
-  box.addEventListener('close', () => box.remove(), { once: true });
-  box.showModal();
-  return box;
-}
-
-function heading(text, onClose) {
-  return el('h2', {}, el('span', { text }), el('button', { type: 'button', class: 'close-x', 'aria-label': 'Close', text: '×', onclick: onClose }));
-}
-
-function exactWithUnit(value, unit) {
-  const text = typeof value === 'number' ? String(value) : formatValue(value);
-  return unit ? `${text} ${unit}` : text;
-}
 
 function parseInput(meta, text) {
   if (meta.type === 'string') return text;
@@ -45,44 +27,16 @@ export function openWrite(ctx, meta, preset) {
     const finish = () => { if (box) box.close(); };
     const unit = meta.unit || '';
     const current = () => ctx.live.get(meta.name);
-    let watch = null;
 
     const form = el('form', { method: 'dialog', novalidate: true });
-    const currentText = el('span', { class: 'live-value num' });
-    const showCurrent = () => {
-      const item = current();
-      setText(currentText, item ? `${formatWithUnit(item.v, unit)} (${qualityName(item.q)})` : formatWithUnit(meta.value, unit));
-    };
-    watch = ctx.live.watch([meta.name], showCurrent);
-    showCurrent();
-
-    let input;
-    const entry = el('div');
-    if (meta.type === 'bool') {
-      const now = current() ? current().v : meta.value;
-      const make = (value) => el('label', {}, el('input', { type: 'radio', name: 'value', value: String(value), checked: value === !now }), value ? 'true' : 'false');
-      input = el('div', { class: 'choices', role: 'radiogroup', 'aria-label': 'New value' }, make(true), make(false));
-      entry.append(el('label', { text: 'New value' }), input);
-    } else {
-      input = el('input', { type: 'text', name: 'value', autocomplete: 'off', inputmode: meta.type === 'string' ? 'text' : 'decimal', id: 'write-value' });
-      const now = current() ? current().v : meta.value;
-      input.value = now === undefined || now === null ? '' : String(now);
-      entry.append(el('label', { for: 'write-value', text: `New value${unit ? ` (${unit})` : ''}` }), input);
-    }
+    const { facts, watch } = tagFacts(ctx, meta);
+    const field = valueEntry(ctx, meta, { id: 'write-value', label: 'New value' });
+    const entry = field.entry;
     const readValue = () => {
-      if (meta.type === 'bool') {
-        const checked = input.querySelector('input:checked');
-        return checked ? checked.value === 'true' : null;
-      }
-      return parseInput(meta, input.value);
+      const value = field.read();
+      return meta.type === 'bool' || value === null ? value : parseInput(meta, value);
     };
 
-    const facts = el('dl', { class: 'kv small' },
-      el('dt', { text: 'Now' }), el('dd', {}, currentText),
-      el('dt', { text: 'Type' }), el('dd', { text: meta.type }),
-    );
-    const range = formatRange(meta);
-    if (range) facts.append(el('dt', { text: 'Range' }), el('dd', { text: `${range}${unit ? ` ${unit}` : ''}` }));
     const message = el('div', { role: 'alert' });
     const stepValue = el('div', {}, entry);
     const change = el('div', { class: 'change num' });
@@ -99,7 +53,7 @@ export function openWrite(ctx, meta, preset) {
       change.append(
         el('span', { class: 'old', text: formatWithUnit(old, unit) }),
         el('span', { class: 'arrow', text: '→' }),
-        el('strong', { class: 'new', text: exactWithUnit(value, unit) }),  // exactly what will be written
+        el('strong', { class: 'new', text: formatExact(value, unit) }),  // exactly what will be written
       );
       clear(message);
       stepValue.hidden = true;
@@ -133,7 +87,7 @@ export function openWrite(ctx, meta, preset) {
         const item = answer.results && answer.results[0];
         if (item && item.ok) {
           result = true;
-          message.append(el('div', { class: 'done', text: `Written: ${exactWithUnit(item.value, unit)}. It applies at the next scan.` }));
+          message.append(el('div', { class: 'done', text: `Written: ${formatExact(item.value, unit)}. It applies at the next scan.` }));
           next.hidden = true;
           back.hidden = true;
           cancel.textContent = 'Close';
@@ -152,15 +106,15 @@ export function openWrite(ctx, meta, preset) {
     });
 
     form.append(
-      heading(`Write ${meta.name}`, finish),
+      dialogHeading(`Write ${meta.name}`, finish),
       meta.description ? el('p', { class: 'desc', text: meta.description }) : null,
       facts, stepValue, stepConfirm, message,
       el('div', { class: 'actions' }, cancel, back, next),
     );
-    box = show(form);
-    box.addEventListener('close', () => { if (watch) watch.close(); resolve(result); }, { once: true });
+    box = showDialog(form);
+    box.addEventListener('close', () => { watch.close(); resolve(result); }, { once: true });
     if (preset !== undefined) toConfirm(preset);
-    else if (input.focus) (meta.type === 'bool' ? input.querySelector('input') : input).focus();
+    else field.focus();
   });
 }
 
@@ -175,7 +129,7 @@ export function openLogin(ctx) {
     const message = el('div', { role: 'alert' });
     const submit = el('button', { type: 'submit', class: 'btn', text: 'Log in' });
     const form = el('form', { method: 'dialog' },
-      heading('Log in', close),
+      dialogHeading('Log in', close),
       el('p', { class: 'muted small', text: 'The users of the runtime (softplc users add NAME --role ROLE), the same as for OPC UA.' }),
       el('label', { for: 'login-user', text: 'User' }), user,
       el('label', { for: 'login-password', text: 'Password' }), password,
@@ -196,7 +150,7 @@ export function openLogin(ctx) {
         submit.disabled = false;
       }
     });
-    box = show(form);
+    box = showDialog(form);
     box.addEventListener('close', () => resolve(ok), { once: true });
     user.focus();
   });
@@ -243,11 +197,11 @@ export function openDetails(ctx, title, tags, subtitle) {
   update([...rows.keys()]);
   let box = null;
   const node = el('div', { class: 'body' },
-    heading(title, () => box && box.close()),
+    dialogHeading(title, () => box && box.close()),
     subtitle ? el('p', { class: 'muted small', text: subtitle }) : null,
     el('table', { class: 'detail-list' }, body),
   );
-  box = show(node, 'drawer');
+  box = showDialog(node, 'drawer');
   box.addEventListener('close', () => watch.close(), { once: true });
 }
 

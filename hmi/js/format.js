@@ -24,6 +24,12 @@ export function formatWithUnit(value, unit, decimals) {
   return unit && value !== undefined && value !== null ? `${text} ${unit}` : text;
 }
 
+/** A value exactly as written or forced (a number unrounded), with its unit. */
+export function formatExact(value, unit) {
+  const text = typeof value === 'number' ? String(value) : formatValue(value);
+  return unit ? `${text} ${unit}` : text;
+}
+
 /** CSS class of a value by its quality code (0 good, 1 uncertain, 2 bad). */
 export function qualityClass(code) {
   return code === 1 ? 'q-uncertain' : code === 2 ? 'q-bad' : '';

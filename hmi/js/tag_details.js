@@ -6,6 +6,7 @@
 import { el, clear, setText } from './dom.js';
 import { formatWithUnit, formatRange, formatTime, qualityName } from './format.js';
 import { openWrite } from './dialogs.js';
+import { dialogHeading } from './dialog_box.js';
 import { TrendChart, historized } from './trend_chart.js';
 import { runtimeNow } from './runtime_clock.js';
 import { forcedMark, showForced, forceControls } from './ops/forcing.js';
@@ -32,7 +33,7 @@ export function openTagDetails(ctx, meta) {
   const force = forceControls(ctx, meta, reopen);
   const box = el('dialog', { class: 'dialog drawer tag-details', 'data-tag': meta.name },
     el('div', { class: 'body' },
-      el('h2', {}, el('span', { text: meta.name }), el('button', { type: 'button', class: 'close-x', 'aria-label': 'Close', text: '×', onclick: () => box.close() })),
+      dialogHeading(meta.name, () => box.close()),
       meta.description ? el('p', { class: 'desc', text: meta.description }) : null,
       el('div', { class: 'tag-now' }, value, forced, quality, stamp, write, force),
       facts, trendArea));

@@ -19,7 +19,7 @@ from softplc.alarms.engine import AlarmEngine
 from softplc.alarms.journal import AlarmJournal, JournalSink
 from softplc.alarms.settings import AlarmSettings
 from softplc.alarms.summary import SummaryTags
-from softplc.storage import BatchWriter, Database, StorageSettings
+from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.tagdb import Origin
 
 if TYPE_CHECKING:
@@ -73,8 +73,7 @@ class AlarmsAdapter:
     async def _open_journal(self, runtime: Runtime) -> AlarmJournal:
         if runtime.clock.simulated:
             path = Path(runtime.state_dir) / SIM_JOURNAL_FILE
-            for stale in (path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")):
-                stale.unlink(missing_ok=True)
+            remove_sqlite_store(path)
             storage = StorageSettings.sqlite(path)
         else:
             storage = StorageSettings.from_section(self.settings.journal, Path(runtime.state_dir), JOURNAL_FILE)

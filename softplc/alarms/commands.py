@@ -31,7 +31,7 @@ from softplc.alarms.model import AlarmState, Priority
 from softplc.clock import Clock
 from softplc.commands import CommandRefused, Commands, Permission
 from softplc.durations import parse_duration
-from softplc.storage.database import driver_errors
+from softplc.storage.command_search import search_for_command
 from softplc.tagdb import Origin
 
 STATE_FILTERS = ("all", "annunciated", "active", "unacknowledged", "shelved", "suppressed", "out_of_service", "normal")
@@ -101,13 +101,7 @@ def register_alarm_commands(commands: Commands, engine: AlarmEngine, actions: Al
     async def journal_rows(arguments: Mapping[str, Any], origin: Origin) -> list[dict[str, Any]]:
         if journal is None:
             raise CommandRefused("this runtime keeps no alarm journal")
-        query = _journal_query(arguments)
-        # Rows recorded a moment ago are still queued: commit them first, off the event loop.
-        await clock.run_blocking(journal.flush, 10.0)
-        try:
-            rows = await clock.run_blocking(journal.search, query)
-        except driver_errors() as error:  # the store is down (a PostgreSQL restart): say so, keep running
-            raise CommandRefused(f"the alarm journal cannot be read now: {str(error).strip() or type(error).__name__}") from None
+        rows = await search_for_command(clock, journal, _journal_query(arguments), "the alarm journal")
         return [row.to_dict() for row in rows]
 
     table: list[tuple[str, Callable[..., Any], Permission, str, dict[str, str]]] = [

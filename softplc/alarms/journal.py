@@ -18,7 +18,8 @@ from dataclasses import asdict, dataclass, fields
 from typing import IO, Any
 
 from softplc.events import Event
-from softplc.storage import BatchWriter, Database
+from softplc.storage import BatchWriter, Database, escape_like, like_pattern, plant_and_time
+from softplc.timestamps import format_utc
 
 TABLE = "alarm_journal"
 MAX_ROWS = 10_000  # most rows one search returns
@@ -136,24 +137,13 @@ class AlarmJournal:
 
 def search(database: Database, query: JournalQuery, plant: str | None) -> list[JournalEntry]:
     """Rows of a journal store matching `query` (`plant` is whose rows `query.plant=None` means)."""
-    where: list[str] = []
-    values: list[Any] = []
-    wanted_plant = plant if query.plant is None else query.plant
-    if wanted_plant not in (None, "", "*"):
-        where.append("plant = ?")
-        values.append(wanted_plant)
+    where, values = plant_and_time(query.plant, plant, query.since, query.until)
     if query.alarm:
         where.append("lower(alarm) LIKE ? ESCAPE '\\'")
-        values.append(_like(query.alarm.lower()))
-    if query.since is not None:
-        where.append("time >= ?")
-        values.append(query.since)
-    if query.until is not None:
-        where.append("time < ?")
-        values.append(query.until)
+        values.append(like_pattern(query.alarm.lower()))
     if query.text:
         where.append("(lower(message) LIKE ? ESCAPE '\\' OR lower(comment) LIKE ? ESCAPE '\\' OR lower(user_name) LIKE ? ESCAPE '\\')")
-        pattern = "%" + _escape(query.text.lower()) + "%"
+        pattern = "%" + escape_like(query.text.lower()) + "%"
         values.extend([pattern] * 3)
     if query.user:
         where.append("user_name = ?")
@@ -168,7 +158,7 @@ def search(database: Database, query: JournalQuery, plant: str | None) -> list[J
     statement += f" ORDER BY time DESC, id DESC LIMIT {limit} OFFSET {max(0, int(query.offset))}"
     connection = database.connect(readonly=True)
     try:
-        if not _has_table(connection, database):
+        if not database.has_table(connection, TABLE):
             return []
         rows = connection.execute(database.sql(statement), values).fetchall()
     finally:
@@ -178,14 +168,11 @@ def search(database: Database, query: JournalQuery, plant: str | None) -> list[J
 
 def write_csv(entries: Iterable[JournalEntry], stream: IO[str]) -> int:
     """Write rows as CSV with a header (time as ISO 8601 UTC and as seconds); returns how many."""
-    from datetime import datetime, timezone
-
     writer = csv.writer(stream)
     writer.writerow(["time_utc", *COLUMNS])
     count = 0
     for entry in entries:
-        stamp = datetime.fromtimestamp(entry.time, timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
-        writer.writerow([stamp, *(getattr(entry, name) for name in COLUMNS)])
+        writer.writerow([format_utc(entry.time), *(getattr(entry, name) for name in COLUMNS)])
         count += 1
     return count
 
@@ -193,23 +180,6 @@ def write_csv(entries: Iterable[JournalEntry], stream: IO[str]) -> int:
 def entries_from_dicts(rows: Sequence[dict[str, Any]]) -> list[JournalEntry]:
     """Rows received as JSON (the OPC UA commands door) back into entries."""
     return [JournalEntry(**{name: row[name] for name in COLUMNS}) for row in rows]
-
-
-def _has_table(connection: Any, database: Database) -> bool:
-    if database.postgresql:
-        found = connection.execute("SELECT to_regclass(%s)", (TABLE,)).fetchone()
-        return bool(found and found[0])
-    found = connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (TABLE,)).fetchone()
-    return found is not None
-
-
-def _escape(text: str) -> str:
-    return text.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
-
-
-def _like(pattern: str) -> str:
-    """A name pattern with * and ? as a LIKE pattern (other characters literal)."""
-    return _escape(pattern).replace("*", "%").replace("?", "_")
 
 
 def _text(value: Any) -> str:

@@ -185,21 +185,19 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
         raise _Failure(str(error), _LOGIN_STATUS[error.kind]) from None
 
     async def session() -> list[dict[str, Any]]:
-        from softplc.live.session import LiveSession, NotSoftplc
+        from softplc.live.session import NotSoftplc, open_live_session
         from softplc.opcua.door_client import CommandError, call_command
-        from softplc.opcua.login import connect
 
-        client = await connect(login)
         try:
-            live = await LiveSession.open(client)
-            rows: list[dict[str, Any]] = []
-            while len(rows) < wanted:
-                limit = int(min(PAGE, wanted - len(rows)))
-                page = await call_command(live.client, live.ns, "audit.query", {**arguments, "limit": limit, "offset": len(rows)})
-                rows += page
-                if len(page) < PAGE:
-                    break
-            return rows
+            async with open_live_session(login) as live:
+                rows: list[dict[str, Any]] = []
+                while len(rows) < wanted:
+                    limit = int(min(PAGE, wanted - len(rows)))
+                    page = await call_command(live.client, live.ns, "audit.query", {**arguments, "limit": limit, "offset": len(rows)})
+                    rows += page
+                    if len(page) < PAGE:
+                        break
+                return rows
         except NotSoftplc as error:
             raise _Failure(f"{login.endpoint}: {error}", EXIT_NO_CONNECTION) from None
         except CommandError as error:
@@ -210,11 +208,6 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
             if error.no_door:
                 raise _Failure(f"{login.endpoint}: {error}") from None
             raise _Failure(str(error)) from None
-        finally:
-            try:
-                await asyncio.wait_for(client.disconnect(), login.timeout)
-            except Exception:  # the server is gone already: nothing to close politely
-                client.disconnect_socket()
 
     try:
         return asyncio.run(session())

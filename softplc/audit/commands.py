@@ -13,23 +13,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from datetime import datetime, timezone
-from typing import Any, Protocol
+from typing import Any
 
-from softplc.audit.entry import AuditEntry
 from softplc.audit.queries import KINDS, MAX_ROWS, AuditQuery
 from softplc.clock import Clock
 from softplc.commands import CommandRefused, Commands, Permission
-from softplc.storage.database import driver_errors
+from softplc.storage.command_search import Searchable, search_for_command
 from softplc.tagdb import Origin
-
-
-class _Trail(Protocol):
-    """What the command uses of `softplc.audit.recorder.AuditRecorder` (which imports this module)."""
-
-    def flush(self, timeout: float = 30.0) -> bool: ...
-
-    def search(self, query: AuditQuery) -> list[AuditEntry]: ...
+from softplc.timestamps import parse_utc
 
 ARGUMENTS = {
     "since": "from (epoch s or ISO 8601, UTC unless a zone is given)", "until": "to, excluded (epoch s or ISO 8601)",
@@ -40,17 +31,11 @@ ARGUMENTS = {
 }
 
 
-def register_audit_commands(commands: Commands, recorder: _Trail, clock: Clock) -> list[Callable[[], None]]:
+def register_audit_commands(commands: Commands, recorder: Searchable[AuditQuery], clock: Clock) -> list[Callable[[], None]]:
     """Register `audit.query`; returns its unregister."""
 
     async def query(arguments: Mapping[str, Any], origin: Origin) -> list[dict[str, Any]]:
-        wanted = query_from_arguments(arguments)
-        # Entries recorded a moment ago are still queued: commit them first, off the event loop.
-        await clock.run_blocking(recorder.flush, 10.0)
-        try:
-            rows = await clock.run_blocking(recorder.search, wanted)
-        except driver_errors() as error:  # the store is down (a PostgreSQL restart): say so, keep running
-            raise CommandRefused(f"the audit trail cannot be read now: {str(error).strip() or type(error).__name__}") from None
+        rows = await search_for_command(clock, recorder, query_from_arguments(arguments), "the audit trail")
         return [row.to_dict() for row in rows]
 
     return [commands.register("audit.query", query, permission=Permission.ENGINEER, description="read the audit trail",
@@ -90,11 +75,9 @@ def parse_time(value: Any, key: str) -> float | None:
         return float(value)
     if isinstance(value, str):
         try:
-            moment = datetime.fromisoformat(value.strip().replace("Z", "+00:00"))
+            return parse_utc(value)
         except ValueError:
             pass
-        else:
-            return (moment if moment.tzinfo is not None else moment.replace(tzinfo=timezone.utc)).timestamp()
     raise CommandRefused(f"audit.query: '{key}' must be epoch seconds or an ISO 8601 time such as 2026-11-24T08:00:00Z, not {value!r}")
 
 

@@ -11,11 +11,11 @@ import json
 import json.encoder
 import math
 from dataclasses import asdict, dataclass
-from datetime import datetime, timezone
 from typing import Any
 
 from softplc.commands import CommandCall
 from softplc.tagdb import WriteEvent
+from softplc.timestamps import format_utc
 
 MAX_TEXT = 4096  # longest value, argument list or detail kept (a client may send megabytes)
 _string = json.encoder.encode_basestring  # a str as JSON text, in C (as json.dumps(..., ensure_ascii=False))
@@ -44,7 +44,7 @@ class AuditEntry:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready, with the time also as ISO 8601 UTC (`time_utc`)."""
-        return {"time_utc": format_time(self.time), **asdict(self)}
+        return {"time_utc": format_utc(self.time), **asdict(self)}
 
     @classmethod
     def from_dict(cls, row: dict[str, Any]) -> AuditEntry:
@@ -126,11 +126,6 @@ def decode(text: str | None) -> Any:
 
 def _clip(text: str) -> str:
     return text if len(text) <= MAX_TEXT else f"{text[:MAX_TEXT]}… ({len(text)} characters)"
-
-
-def format_time(seconds: float) -> str:
-    """ISO 8601 in UTC with milliseconds."""
-    return datetime.fromtimestamp(seconds, timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 def format_value(value: Any) -> str:

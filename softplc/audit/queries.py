@@ -14,9 +14,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import IO, Any
 
-from softplc.audit.entry import COLUMNS, AuditEntry, entry_of, format_time, format_value
+from softplc.audit.entry import COLUMNS, AuditEntry, entry_of, format_value
 from softplc.audit.store import CATALOGUE, SQL_COLUMNS
-from softplc.storage import Database
+from softplc.storage import Database, like_pattern, plant_and_time
+from softplc.timestamps import format_utc
 
 MAX_ROWS = 10_000  # most rows one search returns
 KINDS = ("write", "command")
@@ -64,18 +65,7 @@ def search(database: Database, query: AuditQuery, plant: str | None) -> list[Aud
 
 
 def _conditions(query: AuditQuery, plant: str | None, postgresql: bool) -> tuple[list[str], list[Any]]:
-    where: list[str] = []
-    values: list[Any] = []
-    wanted_plant = plant if query.plant is None else query.plant
-    if wanted_plant not in (None, "", "*"):
-        where.append("plant = ?")
-        values.append(wanted_plant)
-    if query.since is not None:
-        where.append("time >= ?")
-        values.append(query.since)
-    if query.until is not None:
-        where.append("time < ?")
-        values.append(query.until)
+    where, values = plant_and_time(query.plant, plant, query.since, query.until)
     targets: list[str] = []
     if query.tag:
         targets.append(_match("tag", query.tag, values, postgresql))
@@ -107,18 +97,13 @@ def _match(column: str, pattern: str, values: list[Any], postgresql: bool) -> st
     if not postgresql:
         values.append(pattern.replace("[", "[[]"))  # SQLite's GLOB: * and ?, case-sensitive like names
         return f"{column} GLOB ?"
-    escaped = pattern.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
-    values.append(escaped.replace("*", "%").replace("?", "_"))
+    values.append(like_pattern(pattern))
     return f"{column} LIKE ? ESCAPE '\\'"
 
 
 def _partitions(connection: Any, database: Database, query: AuditQuery) -> list[str]:
     """The partitions that may hold entries of the query's time range, newest first."""
-    if database.postgresql:
-        found = connection.execute("SELECT to_regclass(%s)", (CATALOGUE,)).fetchone()
-        if not (found and found[0]):
-            return []
-    elif connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (CATALOGUE,)).fetchone() is None:
+    if not database.has_table(connection, CATALOGUE):
         return []
     statement = f"SELECT name FROM {CATALOGUE} WHERE stop > ? AND start < ? ORDER BY start DESC"
     since = query.since if query.since is not None else -1e300
@@ -133,6 +118,6 @@ def write_csv(entries: Iterable[AuditEntry], stream: IO[str]) -> int:
     count = 0
     for entry in entries:
         cells = [format_value(getattr(entry, name)) if name in ("arguments", "old", "new") else getattr(entry, name) for name in COLUMNS]
-        writer.writerow([format_time(entry.time), *cells])
+        writer.writerow([format_utc(entry.time), *cells])
         count += 1
     return count

@@ -15,7 +15,6 @@ each start, timestamps in simulated time), never the real plant's trail.
 from __future__ import annotations
 
 import logging
-import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
@@ -26,9 +25,9 @@ from softplc.audit.settings import AuditSettings
 from softplc.audit.store import SINK_NAME, AuditSink
 from softplc.clock import Clock
 from softplc.commands import CommandCall, Commands
-from softplc.realtime import SWITCH_INTERVAL
+from softplc.realtime import shorten_switch_interval
 from softplc.scan_gate import ScanGate
-from softplc.storage import BatchWriter, Database, StorageSettings
+from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.tagdb import TagDatabase, WriteEvent
 
 if TYPE_CHECKING:
@@ -69,11 +68,10 @@ class AuditRecorder:
         if simulated and storage.path is not None:
             # A simulated run starts at the same simulated instant every time: its trail
             # replaces the previous run's instead of overlapping it.
-            for suffix in ("", "-wal", "-shm"):
-                try:
-                    storage.path.with_name(storage.path.name + suffix).unlink(missing_ok=True)
-                except OSError as error:
-                    raise AdapterError(f"audit: cannot open SQLite {storage.path}: {error}") from None
+            try:
+                remove_sqlite_store(storage.path)
+            except OSError as error:
+                raise AdapterError(f"audit: cannot open SQLite {storage.path}: {error}") from None
         self.database = database = Database(storage)
         writer = BatchWriter(database, name="softplc-audit-writer", max_pending=MAX_PENDING)
         # On the real clock the writer steps aside while a scan cycle is due (softplc/scan_gate.py).
@@ -81,11 +79,7 @@ class AuditRecorder:
         self._sink = AuditSink(self.plant, partition=self.settings.partition, retention=self.settings.retention, now=runtime.clock.wall,
                                steps=gate.stepping if gate is not None else None)
         writer.register(self._sink)
-        # The writer thread runs Python code (rows, JSON) between its SQL calls; with the
-        # interpreter's default 5 ms switch interval it could keep the event loop waiting for
-        # the GIL that long, i.e. a late 10 ms scan (as for the historian).
-        if sys.getswitchinterval() > SWITCH_INTERVAL:
-            sys.setswitchinterval(SWITCH_INTERVAL)
+        shorten_switch_interval()  # the writer thread builds rows and JSON in Python between its SQL calls
         error = await runtime.clock.run_blocking(writer.start)
         if error is not None:
             if not database.postgresql:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, storage_problems
+from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, partitioned_spans, span_problems, storage_problems
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
@@ -56,20 +56,12 @@ class AuditSettings:
     def from_config(cls, config: PlantConfig) -> AuditSettings:
         """Settings of a checked configuration (see `problems`); defaults without an `audit:` section."""
         section = config.section("audit") or {}
-        retention = section.get("retention", DEFAULT_RETENTION)
-        return cls(
-            enabled=bool(section.get("enabled", True)),
-            section=section,
-            retention=None if retention in (0, "0") else parse_span(retention),
-            partition=parse_span(section.get("partition", DEFAULT_PARTITION)),
-        )
+        retention, partition = partitioned_spans(section, DEFAULT_RETENTION, DEFAULT_PARTITION)
+        return cls(enabled=bool(section.get("enabled", True)), section=section, retention=retention, partition=partition)
 
     def storage(self, state_dir: Path, *, simulated: bool = False) -> StorageSettings:
         """Where to keep the trail: the configured store, or for a --sim run always STATE_DIR/audit-sim.sqlite."""
-        settings = StorageSettings.from_section(self.section, state_dir, DEFAULT_FILE)
-        if simulated:
-            return StorageSettings.sqlite(state_dir / SIM_FILE, settings.flush_period)
-        return settings
+        return StorageSettings.for_run(self.section, state_dir, DEFAULT_FILE, SIM_FILE, simulated=simulated)
 
 
 def problems(config: PlantConfig) -> list[Problem]:
@@ -78,18 +70,13 @@ def problems(config: PlantConfig) -> list[Problem]:
     source = config.source
     if section is None or source is None:
         return []
-    found = storage_problems(section, ("audit",), source)
-    for key in ("retention", "partition"):
-        if key not in section or (key == "retention" and section[key] in (0, "0")):
-            continue
-        try:
-            seconds = parse_span(section[key])
-        except (TypeError, ValueError) as error:
-            found.append(source.problem(("audit", key), f"bad {key} {section[key]!r}: {error}"))
-            continue
-        if key == "partition" and (seconds < 3600 or seconds % 3600):
-            found.append(source.problem(("audit", key), f"partition must be a whole number of hours (e.g. 24h, 1d, 1w), not {section[key]}"))
-        if key == "retention" and seconds < 3600:
-            found.append(source.problem(("audit", key), f"retention {section[key]} is shorter than an hour: an audit trail that short "
-                                                        "answers no question; write e.g. 30d, or 0 to keep everything"))
+    found = storage_problems(section, ("audit",), source) + span_problems(section, ("audit",), source)
+    retention = section.get("retention", 0)
+    try:
+        too_short = retention not in (0, "0") and parse_span(retention) < 3600
+    except (TypeError, ValueError):  # reported by span_problems
+        too_short = False
+    if too_short:
+        found.append(source.problem(("audit", "retention"), f"retention {retention} is shorter than an hour: an audit trail that short "
+                                                            "answers no question; write e.g. 30d, or 0 to keep everything"))
     return found

@@ -7,43 +7,31 @@ Tables (the same on SQLite and PostgreSQL; times are Unix seconds as double prec
   (time) and (tag, time): the entries. Rows carry the plant's name, so several runtimes can
   share one PostgreSQL store.
 
-Retention drops whole partitions (a table and a catalogue row), never DELETEs rows: a store
-taking 10,000 entries a second stays bounded without a vacuum.
+Retention drops whole partitions (a table and a catalogue row: softplc/storage/partitions.py),
+never DELETEs rows: a store taking 10,000 entries a second stays bounded without a vacuum.
 """
 
 from __future__ import annotations
 
 import contextlib
-import logging
 import math
-import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager
 from typing import Any
 
 from softplc.audit.entry import row_of
 from softplc.storage import Database
-
-log = logging.getLogger(__name__)
+from softplc.storage.partitions import PartitionCatalogue, insert_rows
 
 SINK_NAME = "audit"
 CHUNK = 200  # entries written between two steps: ~1 ms of the writer thread's time, well under a ScanGate's margin
-CATALOGUE = "audit_partitions"
-_LOCK_KEY = 17_005  # PostgreSQL advisory lock: runtimes sharing a server create partitions one at a time
+PARTITIONS = PartitionCatalogue("audit", lock_key=17_005)
+CATALOGUE = PARTITIONS.table
 # Column names in SQL (USER is reserved in PostgreSQL); `sequence` orders entries of the same instant.
 SQL_COLUMNS = ("time", "plant", "kind", "source", "user_name", "peer", "role", "name", "tag", "arguments",
                "old", "new", "accepted", "rule", "detail", "sequence")
 _TYPES = {"time": "DOUBLE PRECISION NOT NULL", "accepted": "SMALLINT NOT NULL", "sequence": "BIGINT NOT NULL",
           "arguments": "TEXT", "old": "TEXT", "new": "TEXT"}
-
-
-def partition_name(start: float) -> str:
-    return "audit_" + time.strftime("%Y%m%d_%H%M%S", time.gmtime(start))  # lower case: PostgreSQL folds names
-
-
-def create_catalogue(connection: Any, database: Database) -> None:
-    connection.cursor().execute(f"CREATE TABLE IF NOT EXISTS {CATALOGUE} (start DOUBLE PRECISION PRIMARY KEY, "
-                                "stop DOUBLE PRECISION NOT NULL, name TEXT NOT NULL)")
 
 
 class AuditSink:
@@ -65,7 +53,7 @@ class AuditSink:
         self._sequence = 0
 
     def prepare(self, connection: Any, database: Database) -> None:
-        create_catalogue(connection, database)
+        PARTITIONS.create(connection.cursor())
         self._partitions.clear()
 
     def write(self, connection: Any, database: Database, items: list[Any]) -> None:
@@ -91,56 +79,24 @@ class AuditSink:
                 current = by_partition.setdefault(current_start, [])
             current.append(row)  # type: ignore[union-attr]
         for start, rows in by_partition.items():
-            _insert(connection, database, self._partition(connection, database, start), rows)
+            insert_rows(connection, database, self._partition(connection, database, start), SQL_COLUMNS, rows)
         self._sequence = sequence
 
     def maintain(self, connection: Any, database: Database) -> None:
         if self.retention is None:
             return
-        drop_partitions_before(connection, database, self._now() - self.retention)
+        PARTITIONS.drop_before(connection, database, self._now() - self.retention)
         self._partitions.clear()
 
     def _partition(self, connection: Any, database: Database, start: float) -> str:
-        name = partition_name(start)
-        if start in self._partitions:
-            return name
-        cursor = connection.cursor()
-        if database.postgresql:
-            cursor.execute("SELECT pg_advisory_xact_lock(%s)", (_LOCK_KEY,))
-        columns = ", ".join(f"{column} {_TYPES.get(column, 'TEXT NOT NULL')}" for column in SQL_COLUMNS)
-        cursor.execute(f"CREATE TABLE IF NOT EXISTS {name} ({columns})")
-        cursor.execute(f"CREATE INDEX IF NOT EXISTS {name}_time ON {name} (time)")
-        cursor.execute(f"CREATE INDEX IF NOT EXISTS {name}_tag ON {name} (tag, time)")
-        cursor.execute(database.sql(f"INSERT INTO {CATALOGUE} (start, stop, name) VALUES (?, ?, ?) ON CONFLICT (start) DO NOTHING"),
-                       (start, start + self.partition, name))
-        self._partitions.add(start)
-        return name
+        return PARTITIONS.ensure(connection, database, start, self.partition, self._partitions, _create_partition)
 
 
-def _insert(connection: Any, database: Database, table: str, rows: list[tuple[Any, ...]]) -> None:
-    cursor = connection.cursor()
-    if database.postgresql:
-        # COPY streams the rows in one statement: several times faster than INSERTs.
-        with cursor.copy(f"COPY {table} ({', '.join(SQL_COLUMNS)}) FROM STDIN") as copy:
-            for row in rows:
-                copy.write_row(row)
-    else:
-        placeholders = ", ".join("?" for _ in SQL_COLUMNS)
-        cursor.executemany(f"INSERT INTO {table} ({', '.join(SQL_COLUMNS)}) VALUES ({placeholders})", rows)
-
-
-def drop_partitions_before(connection: Any, database: Database, cutoff: float) -> list[str]:
-    """Drop every partition that ends at or before `cutoff` (whole tables); return their names."""
-    cursor = connection.cursor()
-    cursor.execute(database.sql(f"SELECT start, name FROM {CATALOGUE} WHERE stop <= ? ORDER BY start"), (cutoff,))
-    dropped = []
-    for start, name in cursor.fetchall():
-        cursor.execute(f"DROP TABLE IF EXISTS {name}")
-        cursor.execute(database.sql(f"DELETE FROM {CATALOGUE} WHERE start = ?"), (start,))
-        dropped.append(name)
-    if dropped:
-        log.info("audit retention: dropped %d partition(s) up to %s", len(dropped), dropped[-1])
-    return dropped
+def _create_partition(cursor: Any, name: str) -> None:
+    columns = ", ".join(f"{column} {_TYPES.get(column, 'TEXT NOT NULL')}" for column in SQL_COLUMNS)
+    cursor.execute(f"CREATE TABLE IF NOT EXISTS {name} ({columns})")
+    cursor.execute(f"CREATE INDEX IF NOT EXISTS {name}_time ON {name} (time)")
+    cursor.execute(f"CREATE INDEX IF NOT EXISTS {name}_tag ON {name} (tag, time)")
 
 
 @contextlib.contextmanager

@@ -13,10 +13,11 @@ import fnmatch
 import json
 import math
 import sys
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TextIO
+
 from softplc.history.aggregates import Aggregate
+from softplc.timestamps import format_utc, parse_utc
 
 EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
 
@@ -106,7 +107,7 @@ def _tags(args: argparse.Namespace) -> int:
     rows = []
     for name, info in tags.items():
         span = reader.span(name)
-        first, last = (format_time(span[0]), format_time(span[1])) if span else ("", "")
+        first, last = (format_utc(span[0]), format_utc(span[1])) if span else ("", "")
         rows.append([name, info.type, info.unit, "stepped" if info.stepped else "sloped", first, last])
     print_table(rows, ("tag", "type", "unit", "interpolation", "first", "last"))
     return EXIT_OK
@@ -135,7 +136,7 @@ def _export(args: argparse.Namespace) -> int:
     end = parse_time(args.end, last) if args.end else math.nextafter(last, math.inf)
     start = parse_time(args.start, last) if args.start else min(span[0] for span in spans)
     if end <= start:
-        raise _Failure(f"--to ({format_time(end)}) must be after --from ({format_time(start)})")
+        raise _Failure(f"--to ({format_utc(end)}) must be after --from ({format_utc(start)})")
     series: dict[str, list[Any]] = {}
     for name in names:
         if args.interval:
@@ -154,9 +155,9 @@ def _export(args: argparse.Namespace) -> int:
     stream: TextIO = open(args.output, "w", newline="", encoding="utf-8") if args.output else sys.stdout
     try:
         if args.format == "json":
-            document = {"plant": reader.plant, "from": format_time(start), "to": format_time(end),
+            document = {"plant": reader.plant, "from": format_utc(start), "to": format_utc(end),
                         "aggregate": args.aggregate if args.interval else "raw",
-                        "tags": {name: [{"time": format_time(s.time), "value": _json_value(s.value), "quality": s.quality.value}
+                        "tags": {name: [{"time": format_utc(s.time), "value": _json_value(s.value), "quality": s.quality.value}
                                         for s in samples] for name, samples in series.items()}}
             json.dump(document, stream, indent=1)
             stream.write("\n")
@@ -164,7 +165,7 @@ def _export(args: argparse.Namespace) -> int:
             writer = csv.writer(stream)
             writer.writerow(["tag", "time", "value", "quality"])
             for name, samples in series.items():
-                writer.writerows([name, format_time(s.time), "" if s.value is None else s.value, s.quality.value] for s in samples)
+                writer.writerows([name, format_utc(s.time), "" if s.value is None else s.value, s.quality.value] for s in samples)
     finally:
         if args.output:
             stream.close()
@@ -198,14 +199,6 @@ def parse_time(text: str, last: float) -> float:
     except ValueError:
         pass
     try:
-        moment = datetime.fromisoformat(text.replace("Z", "+00:00"))
+        return parse_utc(text)
     except ValueError:
         raise _Failure(f"bad time {text!r}: write ISO 8601 (2026-01-01T08:00:00), Unix seconds, or -1h") from None
-    if moment.tzinfo is None:
-        moment = moment.replace(tzinfo=timezone.utc)
-    return moment.timestamp()
-
-
-def format_time(seconds: float) -> str:
-    """ISO 8601 in UTC with milliseconds."""
-    return datetime.fromtimestamp(seconds, timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")

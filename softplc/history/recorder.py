@@ -13,17 +13,16 @@ from __future__ import annotations
 import heapq
 import logging
 import math
-import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from softplc.history.commands import register_history_commands
 from softplc.history.queries import HistoryReader
 from softplc.history.settings import HistorySettings, TagPolicy
-from softplc.realtime import SWITCH_INTERVAL
 from softplc.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.history.swinging_door import SwingingDoor
-from softplc.storage import BatchWriter, Database, StorageSettings
+from softplc.realtime import shorten_switch_interval
+from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.tags import Quality, Tag
 
 if TYPE_CHECKING:
@@ -121,21 +120,16 @@ class HistoryRecorder:
         if simulated and self.storage.path is not None:
             # A simulated run starts at the same simulated instant every time: its history
             # replaces the previous run's instead of overlapping it.
-            for suffix in ("", "-wal", "-shm"):
-                try:
-                    self.storage.path.with_name(self.storage.path.name + suffix).unlink(missing_ok=True)
-                except OSError as error:
-                    raise AdapterError(f"history: cannot open SQLite {self.storage.path}: {error}") from None
+            try:
+                remove_sqlite_store(self.storage.path)
+            except OSError as error:
+                raise AdapterError(f"history: cannot open SQLite {self.storage.path}: {error}") from None
         infos = [TagInfo(name, kind, unit, self.policies[name].stepped) for name, (kind, unit) in self.types.items()]
         sink = HistorySink(self.plant, infos, partition=self.settings.partition, retention=self.settings.retention)
         database = Database(self.storage)
         writer = BatchWriter(database, name="softplc-history-writer")
         writer.register(sink)
-        # The writer thread runs Python code (building rows) between its SQLite calls; with the
-        # interpreter's default 5 ms switch interval it could keep the event loop waiting for
-        # the GIL that long, i.e. a late 10 ms scan. 0.5 ms, as `--rt-priority` sets too.
-        if sys.getswitchinterval() > SWITCH_INTERVAL:
-            sys.setswitchinterval(SWITCH_INTERVAL)
+        shorten_switch_interval()  # the writer thread builds rows in Python between its SQL calls
         error = await runtime.clock.run_blocking(writer.start)
         if error is not None:
             if not database.postgresql:

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, storage_problems
+from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, partitioned_spans, span_problems, storage_problems
 from softplc.yamlsource import Location, Problem
 
 if TYPE_CHECKING:
@@ -135,22 +135,19 @@ class HistorySettings:
         """Settings of a checked configuration (call `problems` first); `extra_rules`: from tags' own keys."""
         section = config.raw.get("history") or {}
         rules = [_rule(spec, ("history", "record", index)) for index, spec in enumerate(section.get("record") or [])]
-        retention = section.get("retention", DEFAULT_RETENTION)
+        retention, partition = partitioned_spans(section, DEFAULT_RETENTION, DEFAULT_PARTITION)
         return cls(
             enabled=bool(section.get("enabled", True)),
             section=section,
-            retention=None if retention in (0, "0", None) else parse_span(retention),
-            partition=parse_span(section.get("partition", DEFAULT_PARTITION)),
+            retention=retention,
+            partition=partition,
             sim=bool(section.get("sim", True)),
             rules=(*rules, *extra_rules),
         )
 
     def storage(self, state_dir: Path, *, simulated: bool = False) -> StorageSettings:
         """Where to record: the configured store, or for a --sim run always STATE_DIR/history-sim.sqlite."""
-        settings = StorageSettings.from_section(self.section, state_dir, DEFAULT_FILE)
-        if simulated:
-            return StorageSettings.sqlite(state_dir / SIM_FILE, settings.flush_period)
-        return settings
+        return StorageSettings.for_run(self.section, state_dir, DEFAULT_FILE, SIM_FILE, simulated=simulated)
 
     def policies(self, definitions: Iterable[TagDef]) -> dict[str, TagPolicy]:
         """Each recorded tag's policy (tags no rule records are left out)."""
@@ -225,20 +222,11 @@ def problems(config: PlantConfig, definitions: Sequence[TagDef] | None = None) -
         from softplc.systags import system_tag_definitions
 
         definitions = [*config.tags, *system_tag_definitions(config.tasks)]
-    found = storage_problems(section, ("history",), source)
+    found = storage_problems(section, ("history",), source) + span_problems(section, ("history",), source)
 
     def at(path: Sequence[Any], message: str) -> None:
         found.append(source.problem(path, message))
 
-    for key in ("retention", "partition"):
-        if key in section and section[key] not in (0, "0"):
-            try:
-                seconds = parse_span(section[key])
-            except (TypeError, ValueError) as error:
-                at(("history", key), f"bad {key} {section[key]!r}: {error}")
-                continue
-            if key == "partition" and (seconds < 3600 or seconds % 3600):
-                at(("history", key), f"partition must be a whole number of hours (e.g. 24h, 1d, 1w), not {section[key]}")
     rules = section.get("record")
     if not isinstance(rules, list):
         return found

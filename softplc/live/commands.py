@@ -129,23 +129,15 @@ def _run(command: str, args: argparse.Namespace, body: Callable[[LiveSession], A
         return _fail(command, str(error), _LOGIN_STATUS[error.kind])
 
     async def session() -> int:
-        from softplc.live.session import LiveSession, NotSoftplc, UnknownTags
-        from softplc.opcua.login import connect
+        from softplc.live.session import NotSoftplc, UnknownTags, open_live_session
 
-        client = await connect(login)
         try:
-            try:
-                live = await LiveSession.open(client, login.namespace)
+            async with open_live_session(login) as live:
                 return await body(live)
-            except UnknownTags as error:
-                return _fail(command, str(error), EXIT_REFUSED)
-            except NotSoftplc as error:
-                return _fail(command, f"{login.endpoint}: {error}", EXIT_NO_CONNECTION)
-        finally:
-            try:
-                await asyncio.wait_for(client.disconnect(), login.timeout)
-            except Exception:  # the server is gone already: nothing to close politely
-                client.disconnect_socket()
+        except UnknownTags as error:
+            return _fail(command, str(error), EXIT_REFUSED)
+        except NotSoftplc as error:
+            return _fail(command, f"{login.endpoint}: {error}", EXIT_NO_CONNECTION)
 
     try:
         return asyncio.run(session())

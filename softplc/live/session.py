@@ -7,11 +7,14 @@ and a forced tag is served with the StatusCode GoodLocalOverride (softplc/forcin
 
 from __future__ import annotations
 
+import asyncio
 import fnmatch
 import math
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from asyncua import Client, ua
 
@@ -19,6 +22,9 @@ from softplc.datatypes import DataType
 from softplc.opcua.variants import DATA_TYPE_IDS
 from softplc.suggest import did_you_mean
 from softplc.tags import Access, Quality, TagDef
+
+if TYPE_CHECKING:
+    from softplc.opcua.login import Login
 
 SOFTPLC_NAMESPACE = "urn:softplc:tags"
 _DATA_TYPES = {node_id: data_type for data_type, node_id in DATA_TYPE_IDS.items()}
@@ -207,6 +213,21 @@ class LiveSession:
         """One Write of all the values; one StatusCode per item."""
         nodes = [self.client.get_node(self.node_id(tag)) for tag, _ in values]
         return await self.client.write_values(nodes, [ua.DataValue(variant) for _, variant in values], raise_on_partial_error=False)
+
+
+@asynccontextmanager
+async def open_live_session(login: Login) -> AsyncIterator[LiveSession]:
+    """Connect with `login` and open a LiveSession; disconnect when done. Raises LoginError, NotSoftplc."""
+    from softplc.opcua.login import connect
+
+    client = await connect(login)
+    try:
+        yield await LiveSession.open(client, login.namespace)
+    finally:
+        try:
+            await asyncio.wait_for(client.disconnect(), login.timeout)
+        except Exception:  # the server is gone already: nothing to close politely
+            client.disconnect_socket()
 
 
 def _is_glob(pattern: str) -> bool:

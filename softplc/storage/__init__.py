@@ -15,12 +15,19 @@ The contract (stable; the alarm journal builds on it):
   `put()` is cheap and thread-safe (call it on the event loop); `flush()` waits until what was
   put is committed; `stop()` flushes and closes. A failed transaction keeps its rows for the
   next flush (bounded by `max_pending`), so a PostgreSQL restart loses nothing.
+- `PartitionCatalogue(prefix, lock_key)` names, lists and drops a store's time partitions (one
+  table per period, retention drops whole tables); `insert_rows` writes rows into one (COPY on
+  PostgreSQL). The historian and the audit trail keep their rows this way.
+- `sql.py`: name patterns as LIKE (`like_pattern`) and a shared store's plant and time
+  conditions (`plant_and_time`), for the searches of the audit trail and the alarm journal.
 
 Tests get a real PostgreSQL server from the `postgres_dsn` fixture (tests/postgres_server.py)
 and both backends from `storage_database` (see tests/conftest.py).
 """
 
-from softplc.storage.database import Backend, Database, StorageError
+from softplc.storage.database import Backend, Database, StorageError, remove_sqlite_store
+from softplc.storage.partitions import PartitionCatalogue, insert_rows
+from softplc.storage.sql import escape_like, like_pattern, plant_and_time
 from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, storage_problems
 from softplc.storage.writer import BatchWriter, Sink, WriterStats
 
@@ -28,11 +35,17 @@ __all__ = [
     "Backend",
     "BatchWriter",
     "Database",
+    "PartitionCatalogue",
     "STORAGE_PROPERTIES",
     "Sink",
     "StorageError",
     "StorageSettings",
     "WriterStats",
+    "escape_like",
+    "insert_rows",
+    "like_pattern",
     "parse_span",
+    "plant_and_time",
+    "remove_sqlite_store",
     "storage_problems",
 ]

@@ -31,6 +31,13 @@ def driver_errors() -> tuple[type[BaseException], ...]:
     return tuple(errors)
 
 
+def remove_sqlite_store(path: Path) -> None:
+    """Delete a SQLite store with its WAL and shared-memory files (a simulated run starts afresh); raises OSError."""
+    # The WAL with the file: a new database at `path` must never replay the old file's journal.
+    for suffix in ("", "-wal", "-shm"):
+        path.with_name(path.name + suffix).unlink(missing_ok=True)
+
+
 class Database:
     """Where records are kept; `connect()` opens a DB-API connection, `sql()` adapts `?` placeholders."""
 
@@ -60,6 +67,13 @@ class Database:
     def sql(self, text: str) -> str:
         """`text` with `?` placeholders in the backend's own style."""
         return text.replace("?", "%s") if self.postgresql else text
+
+    def has_table(self, connection: Any, name: str) -> bool:
+        """Whether table `name` exists yet (a reader may come before the writer's first transaction)."""
+        if self.postgresql:
+            found = connection.execute("SELECT to_regclass(%s)", (name,)).fetchone()
+            return bool(found and found[0])
+        return connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,)).fetchone() is not None
 
     def connect(self, *, readonly: bool = False) -> Any:
         """A new connection (not thread-safe: use it from one thread). Raises StorageError."""

@@ -60,6 +60,13 @@ class StorageSettings:
         return cls(backend=backend, path=path if backend == "sqlite" else None, dsn=str(section.get("dsn", "")), flush_period=flush)
 
     @classmethod
+    def for_run(cls, section: Mapping[str, Any] | None, state_dir: Path, default_file: str, sim_file: str, *,
+                simulated: bool) -> StorageSettings:
+        """The configured store; for a --sim run always STATE_DIR/sim_file (simulated times never mix with the plant's)."""
+        settings = cls.from_section(section, state_dir, default_file)
+        return cls.sqlite(state_dir / sim_file, settings.flush_period) if simulated else settings
+
+    @classmethod
     def sqlite(cls, path: Path, flush_period: float = DEFAULT_FLUSH_PERIOD) -> StorageSettings:
         return cls(backend="sqlite", path=path, flush_period=flush_period)
 
@@ -99,4 +106,26 @@ def storage_problems(section: Any, where: Sequence[str | int], source: SourceMap
         else:
             if not 0 < seconds <= MAX_FLUSH_PERIOD:
                 problems.append(source.problem((*where, "flush_period"), f"flush_period must be more than 0 and at most {MAX_FLUSH_PERIOD:g}s, not {value}"))
+    return problems
+
+
+def partitioned_spans(section: Mapping[str, Any], default_retention: float, default_partition: float) -> tuple[float | None, float]:
+    """A time-partitioned store's retention (None: keep everything, written 0) and partition size, in seconds."""
+    retention = section.get("retention", default_retention)
+    return (None if retention in (0, "0", None) else parse_span(retention)), parse_span(section.get("partition", default_partition))
+
+
+def span_problems(section: Mapping[str, Any], where: Sequence[str | int], source: SourceMap) -> list[Problem]:
+    """Mistakes of a time-partitioned store's `retention` (0 keeps everything) and `partition` (whole hours)."""
+    problems: list[Problem] = []
+    for key in ("retention", "partition"):
+        if key not in section or (key == "retention" and section[key] in (0, "0")):
+            continue
+        try:
+            seconds = parse_span(section[key])
+        except (TypeError, ValueError) as error:
+            problems.append(source.problem((*where, key), f"bad {key} {section[key]!r}: {error}"))
+            continue
+        if key == "partition" and (seconds < 3600 or seconds % 3600):
+            problems.append(source.problem((*where, key), f"partition must be a whole number of hours (e.g. 24h, 1d, 1w), not {section[key]}"))
     return problems

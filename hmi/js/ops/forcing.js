@@ -6,7 +6,9 @@
 // The commands are tags.force / tags.unforce / tags.forces (commands.js); refusals show inline.
 
 import { el, clear, setText } from '../dom.js';
-import { formatValue, formatWithUnit, formatRange, formatTime, qualityName } from '../format.js';
+import { formatWithUnit, formatTime, formatExact } from '../format.js';
+import { showDialog, dialogHeading } from '../dialog_box.js';
+import { tagFacts, valueEntry } from '../value_entry.js';
 import { command, isEngineer } from './commands.js';
 
 /** The red "F" of a forced value (hidden while not forced). */
@@ -35,24 +37,6 @@ export async function listForces() {
   return answer.result;
 }
 
-function show(node) {
-  for (const open of document.querySelectorAll('dialog.dialog[open]')) open.close();
-  const box = el('dialog', { class: 'dialog force-dialog' }, node);
-  document.body.append(box);
-  box.addEventListener('close', () => box.remove(), { once: true });
-  box.showModal();
-  return box;
-}
-
-function heading(text, onClose) {
-  return el('h2', {}, el('span', { text }), el('button', { type: 'button', class: 'close-x', 'aria-label': 'Close', text: '×', onclick: onClose }));
-}
-
-function valueText(value, unit) {
-  const text = typeof value === 'number' ? String(value) : formatValue(value);
-  return unit ? `${text} ${unit}` : text;
-}
-
 /** The controls a tag's details row gets: Force… for an engineer, Unforce… while it is forced. */
 export function forceControls(ctx, meta, reopen) {
   if (!isEngineer(ctx.session) || meta.access === undefined || meta.name.startsWith('_sys.')) return null;
@@ -78,41 +62,16 @@ export function openForce(ctx, meta) {
     const finish = () => { if (box) box.close(); };
     const unit = meta.unit || '';
     const current = () => ctx.live.get(meta.name);
-    const now = el('span', { class: 'live-value num' });
     const mark = forcedMark(false);
-    const showNow = () => {
-      const item = current();
-      setText(now, item ? `${formatWithUnit(item.v, unit)} (${qualityName(item.q)})` : formatWithUnit(meta.value, unit));
-      showForced(mark, item && item.f);
-    };
-    const watch = ctx.live.watch([meta.name], showNow);
-    showNow();
-
-    let input;
-    const entry = el('div');
-    if (meta.type === 'bool') {
-      const value = current() ? current().v : meta.value;
-      const make = (choice) => el('label', {}, el('input', { type: 'radio', name: 'value', value: String(choice), checked: choice === !value }), choice ? 'true' : 'false');
-      input = el('div', { class: 'choices', role: 'radiogroup', 'aria-label': 'Forced value' }, make(true), make(false));
-      entry.append(el('label', { text: 'Force to' }), input);
-    } else {
-      input = el('input', { type: 'text', name: 'value', autocomplete: 'off', id: 'force-value', inputmode: meta.type === 'string' ? 'text' : 'decimal' });
-      const value = current() ? current().v : meta.value;
-      input.value = value === undefined || value === null ? '' : String(value);
-      entry.append(el('label', { for: 'force-value', text: `Force to${unit ? ` (${unit})` : ''}` }), input);
-    }
+    const { facts, watch } = tagFacts(ctx, meta, mark, (item) => showForced(mark, item && item.f));
+    const field = valueEntry(ctx, meta, { id: 'force-value', label: 'Force to', group: 'Forced value' });
+    const entry = field.entry;
     // Typed JSON for a bool; the text otherwise, parsed by the runtime by the tag's type (as `softplc force` does).
     const readValue = () => {
-      if (meta.type === 'bool') {
-        const checked = input.querySelector('input:checked');
-        return checked ? checked.value === 'true' : null;
-      }
-      return meta.type === 'string' ? input.value : input.value.trim();
+      const value = field.read();
+      return meta.type === 'bool' || meta.type === 'string' || value === null ? value : value.trim();
     };
 
-    const facts = el('dl', { class: 'kv small' }, el('dt', { text: 'Now' }), el('dd', {}, now, ' ', mark), el('dt', { text: 'Type' }), el('dd', { text: meta.type }));
-    const range = formatRange(meta);
-    if (range) facts.append(el('dt', { text: 'Range' }), el('dd', { text: `${range}${unit ? ` ${unit}` : ''}` }));
     const message = el('div', { role: 'alert' });
     const stepValue = el('div', {}, entry);
     const change = el('div', { class: 'change num' });
@@ -125,7 +84,7 @@ export function openForce(ctx, meta) {
       pending = value;
       const old = current() ? current().v : meta.value;
       change.replaceChildren(el('span', { class: 'old', text: formatWithUnit(old, unit) }), el('span', { class: 'arrow', text: '→' }),
-        el('strong', { class: 'new', text: valueText(value, unit) }), ' ', forcedMark(true));
+        el('strong', { class: 'new', text: formatExact(value, unit) }), ' ', forcedMark(true));
       clear(message);
       stepValue.hidden = true;
       stepConfirm.hidden = false;
@@ -163,15 +122,15 @@ export function openForce(ctx, meta) {
       }
     });
     form.append(
-      heading(`Force ${meta.name}`, finish),
+      dialogHeading(`Force ${meta.name}`, finish),
       meta.description ? el('p', { class: 'desc', text: meta.description }) : null,
       el('p', { class: 'warning small', text: 'Forcing pins the value: programs read it, and neither they nor any client can change it until it is unforced. Everyone sees it marked F.' }),
       facts, stepValue, stepConfirm, message,
       el('div', { class: 'actions' }, cancel, back, next),
     );
-    box = show(form);
+    box = showDialog(form, 'force-dialog');
     box.addEventListener('close', () => { watch.close(); resolve(accepted); }, { once: true });
-    (meta.type === 'bool' ? input.querySelector('input') : input).focus();
+    field.focus();
   });
 }
 
@@ -192,7 +151,7 @@ export function openUnforce(ctx, meta, force) {
     const confirm = el('button', { type: 'submit', class: 'btn', text: 'Confirm unforce', disabled: true });
     const cancel = el('button', { type: 'button', class: 'btn secondary', text: 'Cancel', onclick: finish });
     const form = el('form', { method: 'dialog', novalidate: true },
-      heading(`Unforce ${meta.name}`, finish), about, choices, message, el('div', { class: 'actions' }, cancel, confirm));
+      dialogHeading(`Unforce ${meta.name}`, finish), about, choices, message, el('div', { class: 'actions' }, cancel, confirm));
     const restoring = () => form.querySelector('input[name=how]:checked').value === 'restore';
     choices.addEventListener('change', () => { confirm.textContent = restoring() ? 'Confirm unforce and restore' : 'Confirm unforce'; });
     form.addEventListener('submit', async (event) => {
@@ -209,16 +168,16 @@ export function openUnforce(ctx, meta, force) {
         confirm.disabled = false;
       }
     });
-    box = show(form);
+    box = showDialog(form, 'force-dialog');
     box.addEventListener('close', () => resolve(done), { once: true });
     const describe = (entry) => {
       if (!entry) {
         setText(about, `${meta.name} is not forced now.`);
         return;
       }
-      setText(about, `Forced to ${valueText(entry.value, unit)} since ${formatTime(entry.since)} by ${entry.by}.`);
-      keep.replaceChildren(el('span', { class: 'old', text: valueText(entry.value, unit) }), el('span', { class: 'arrow', text: '→' }), el('strong', { class: 'new', text: `${valueText(entry.value, unit)}, not forced` }));
-      restore.replaceChildren(el('span', { class: 'old', text: valueText(entry.value, unit) }), el('span', { class: 'arrow', text: '→' }), el('strong', { class: 'new', text: valueText(entry.previous, unit) }));
+      setText(about, `Forced to ${formatExact(entry.value, unit)} since ${formatTime(entry.since)} by ${entry.by}.`);
+      keep.replaceChildren(el('span', { class: 'old', text: formatExact(entry.value, unit) }), el('span', { class: 'arrow', text: '→' }), el('strong', { class: 'new', text: `${formatExact(entry.value, unit)}, not forced` }));
+      restore.replaceChildren(el('span', { class: 'old', text: formatExact(entry.value, unit) }), el('span', { class: 'arrow', text: '→' }), el('strong', { class: 'new', text: formatExact(entry.previous, unit) }));
       confirm.disabled = false;
     };
     if (force) describe(force);

@@ -5,6 +5,7 @@
 
 import { el, clear, setText } from '../dom.js';
 import { command, isEngineer } from './commands.js';
+import { showDialog, dialogHeading } from '../dialog_box.js';
 
 const VERBS = {
   start: { label: 'Start', done: 'Started', says: (p) => `Program ${p.name} runs its setup() again (a warm start) and is scanned from the next cycle of task ${p.task}.` },
@@ -15,19 +16,6 @@ const VERBS = {
 function describe(value) {
   if (value === undefined || value === null) return 'hold';
   return typeof value === 'string' ? value : JSON.stringify(value);
-}
-
-function show(node, className) {
-  for (const open of document.querySelectorAll('dialog.dialog[open]')) open.close();
-  const box = el('dialog', { class: `dialog ${className || ''}` }, node);
-  document.body.append(box);
-  box.addEventListener('close', () => box.remove(), { once: true });
-  box.showModal();
-  return box;
-}
-
-function heading(text, onClose) {
-  return el('h2', {}, el('span', { text }), el('button', { type: 'button', class: 'close-x', 'aria-label': 'Close', text: '×', onclick: onClose }));
 }
 
 /** Add the controls to the Tasks page `root` (each program's element has data-program). Returns an unmount. */
@@ -80,7 +68,7 @@ export async function decoratePrograms(root, ctx, model) {
     const form = el('form', { method: 'dialog', novalidate: true });
     let box = null;
     cancel.addEventListener('click', () => box.close());
-    form.append(heading(`${verb.label} program ${name}?`, () => box.close()),
+    form.append(dialogHeading(`${verb.label} program ${name}?`, () => box.close()),
       el('p', { text: verb.says(info) }),
       el('p', { class: 'muted small', text: `It is ${info.state || 'in an unknown state'} now; the change lasts until the runtime stops (enabled: in the file says how it starts).` }),
       message, el('div', { class: 'actions' }, cancel, go));
@@ -102,7 +90,7 @@ export async function decoratePrograms(root, ctx, model) {
       }
       refresh();
     });
-    box = show(form);
+    box = showDialog(form);
     go.focus();
   };
 
@@ -143,8 +131,8 @@ async function openOnlineChange(last, refresh) {
   const form = el('form', { method: 'dialog', novalidate: true });
   let box = null;
   cancel.addEventListener('click', () => box.close());
-  form.append(heading('Online change', () => box.close()), status, report, el('div', { class: 'actions' }, cancel, apply));
-  box = show(form, 'wide');
+  form.append(dialogHeading('Online change', () => box.close()), status, report, el('div', { class: 'actions' }, cancel, apply));
+  box = showDialog(form, 'wide');
   const refused = (answer, phase) => {
     const details = answer.details || {};
     setText(status, `${phase} refused — nothing applied.`);
