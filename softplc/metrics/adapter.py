@@ -115,7 +115,8 @@ class MetricsAdapter:
         identity = self.hmi.sessions.identify(request)
         if identity is not None and identity.session is not None:
             return None
-        return "send Authorization: Bearer TOKEN (servers.hmi.metrics.token_file), or scrape from this computer"
+        local = ", or scrape from this computer" if self.settings.anonymous_loopback else ""
+        return f"send Authorization: Bearer TOKEN (servers.hmi.metrics.token_file){local}, or log in to the HMI"
 
 
 def _loopback(address: str | None) -> bool:
@@ -126,7 +127,7 @@ def _loopback(address: str | None) -> bool:
 
 
 def read_or_make_token(path: Path) -> str:
-    """The token in `path` (its first line); a new random one written there (mode 600) when the file is missing."""
+    """The token in `path` (the whole file, surrounding whitespace trimmed); a new random one written there (mode 600) when the file is missing."""
     if path.exists():
         token = path.read_text(encoding="utf-8").strip()
         if len(token) < 16:
