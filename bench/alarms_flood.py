@@ -87,6 +87,7 @@ tasks:
       - {{name: flooder, program: "{here}:Flooder", bind: {{flags: [{flags}]}}, params: {{per_scan: {per_scan}}}}}
 servers:
   modbus: {{enabled: false}}
+  hmi: {{enabled: false}}
   opcua: {{enabled: {str(opcua).lower()}, endpoint: "opc.tcp://127.0.0.1:0/softplc/"}}
 """
     if alarms:

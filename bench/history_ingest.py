@@ -59,7 +59,7 @@ tasks:
     priority: 1
     programs:
       - {{name: flood, program: "{SUPPORT}:Flood", bind: {{tick: tick, values: [{", ".join(names)}]}}}}
-servers: {{opcua: {{enabled: false}}, modbus: {{enabled: false}}}}
+servers: {{opcua: {{enabled: false}}, modbus: {{enabled: false}}, hmi: {{enabled: false}}}}
 history:
   {storage}
   flush_period: 1s

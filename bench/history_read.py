@@ -47,6 +47,7 @@ tasks:
 servers:
   opcua: {{endpoint: "opc.tcp://127.0.0.1:0/softplc/", security: [None]}}
   modbus: {{enabled: false}}
+  hmi: {{enabled: false}}
 history: {{flush_period: 1s}}
 """
 

@@ -79,7 +79,7 @@ class BenchProgram(Program):
 
 
 def make_plant(folder: Path) -> Path:
-    """The default plant plus the bench task, in `folder` (robots/ and programs/ linked from the repository)."""
+    """The default plant plus the bench task, in `folder` (robots/, programs/ and hmi/ linked from the repository)."""
     data = yaml.safe_load((REPO / "tagdb.yaml").read_text())
     data.setdefault("tags", {})["bench_count"] = {"type": "uint32", "group": "Bench"}
     data["tasks"]["bench"] = {
@@ -87,7 +87,7 @@ def make_plant(folder: Path) -> Path:
         "programs": [{"name": "bench", "program": "bench_program.py:BenchProgram",
                       "bind": {"count": "bench_count", "level1": "t01_iBL", "level2": "t02_iBL"}}],
     }
-    for name in ("robots", "programs"):
+    for name in ("robots", "programs", "hmi"):  # hmi: the views the plant declares
         (folder / name).symlink_to(REPO / name)
     (folder / "bench_program.py").write_text(PROGRAM.format(version=1))
     config = folder / "tagdb.yaml"
@@ -106,7 +106,7 @@ async def measure(config_path: Path, changes: int, gap_s: float, adapters_on: bo
     config = load_config(config_path)
     runtime = Runtime(config, RealClock(), state_dir=state_dir)
     if adapters_on:
-        args = build_parser().parse_args(["run", str(config_path), "--modbus-port", "0", "--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/"])
+        args = build_parser().parse_args(["run", str(config_path), "--modbus-port", "0", "--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/", "--hmi-port", "0"])
         for adapter in build_adapters(config, args):
             runtime.add_adapter(adapter)
     task = next(t for t in runtime.tasks if t.name == "bench")

@@ -197,7 +197,7 @@ async def _measure(args: argparse.Namespace) -> tuple[Recorder, dict[str, float]
     config = _plant(args.config, 0.010)
     state_dir = Path(tempfile.mkdtemp(prefix="softplc-orphans-"))
     runtime = Runtime(config, RealClock(), state_dir=state_dir)
-    parsed = build_parser().parse_args(["run", str(args.config), "--modbus-port", "0", "--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/"])
+    parsed = build_parser().parse_args(["run", str(args.config), "--modbus-port", "0", "--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/", "--hmi-port", "0"])
     for adapter in build_adapters(config, parsed):
         if isinstance(adapter, OpcUaServer):
             # Every client comes from 127.0.0.1 here; a real plant's clients have their own addresses.

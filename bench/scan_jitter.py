@@ -120,7 +120,7 @@ async def _measure(config_path: Path, interval: float, seconds: float, loop_name
     runtime = Runtime(config, RealClock(), state_dir=state_dir)
     if adapters_on:
         args = build_parser().parse_args(
-            ["run", str(config_path), "--modbus-port", "0", "--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/"]
+            ["run", str(config_path), "--modbus-port", "0", "--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/", "--hmi-port", "0"]
         )
         for adapter in build_adapters(config, args):
             runtime.add_adapter(adapter)
