@@ -25,6 +25,20 @@ def make_config(tmp_path: Path) -> Callable[[str], PlantConfig]:
     return make
 
 
+@pytest.fixture(autouse=True)
+def _log_summaries_stay_with_their_test():
+    """Write the log flood summaries a test left open at its end, into its own output.
+
+    A summary ("N more lines like this left out...") is written when its window closes or when
+    logging is configured again: without this, the next test that configures logging (any CLI
+    test) would find another test's summary in its stderr — which test depends on the order.
+    """
+    yield
+    from softplc.logs import flush_summaries
+
+    flush_summaries()
+
+
 # -- storage backends (softplc.storage): SQLite, and a real PostgreSQL server ---------------------
 
 _schema_counter = iter(range(1, 1_000_000))

@@ -15,6 +15,7 @@ gives what to tell them. A user entry with `--certificate` logs the agent in wit
 from __future__ import annotations
 
 import datetime
+import fcntl
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,8 +53,15 @@ class ClientCertificate:
 
 def ensure_client_certificate(directory: Path, name: str, application_uri: str | None = None, days: int = 5 * 365) -> ClientCertificate:
     """The certificate NAME.der / NAME.key.pem in `directory`, made (self-signed) if missing or expired."""
-    uri = application_uri or f"urn:softplc:client:{name}"
     directory.mkdir(parents=True, exist_ok=True)
+    # Two clients started at once on first use (two terminals, parallel tests) must not each write
+    # half of a pair: one makes it, the other waits and uses it.
+    with open(directory / f".{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return _existing_or_new(directory, name, application_uri or f"urn:softplc:client:{name}", days)
+
+
+def _existing_or_new(directory: Path, name: str, uri: str, days: int) -> ClientCertificate:
     certificate_path, key_path = directory / f"{name}.der", directory / f"{name}.key.pem"
     if certificate_path.exists() and key_path.exists():
         existing = load_certificate_file(certificate_path)
