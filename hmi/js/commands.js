@@ -1,6 +1,7 @@
-// The door to the runtime's commands (docs/hmi.md, "Commands"): every action of the alarm, journal
-// and trend pages — acknowledge, shelve, comment, read history — is POST /api/commands/NAME with
-// the arguments as JSON, checked by role on the server like every other path (OPC UA, CLI).
+// The door to the runtime's commands (docs/hmi.md, "Commands"): every action of the alarm, journal,
+// trend, forced, tasks and audit pages — acknowledge, shelve, read history, force, start a program,
+// apply an online change, read the audit trail — is POST /api/commands/NAME with the arguments as
+// JSON, checked by role on the server like every other path (OPC UA, CLI).
 
 import { get, post } from './api.js';
 
@@ -14,6 +15,18 @@ export async function call(name, args = {}) {
 export async function callWithTime(name, args = {}) {
   return post(`/api/commands/${encodeURIComponent(name)}`, args);
 }
+
+/** Call a command without throwing for a refusal: {ok: true, result} or {ok: false, status, error, details}. */
+export async function command(name, args = {}) {
+  try {
+    return { ok: true, result: await call(name, args) };
+  } catch (error) {
+    const body = error.body || {};
+    return { ok: false, status: error.status || 0, error: body.error || error.message, details: body.details || null };
+  }
+}
+
+export function isEngineer(session) { return Boolean(session && session.role === 'engineer'); }
 
 let allowedCache = { key: null, answer: null };
 

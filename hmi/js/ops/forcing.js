@@ -9,7 +9,7 @@ import { el, clear, setText } from '../dom.js';
 import { formatWithUnit, formatTime, formatExact } from '../format.js';
 import { showDialog, dialogHeading } from '../dialog_box.js';
 import { tagFacts, valueEntry } from '../value_entry.js';
-import { command, isEngineer } from './commands.js';
+import { command, isEngineer } from '../commands.js';
 
 /** The red "F" of a forced value (hidden while not forced). */
 export function forcedMark(forced) {

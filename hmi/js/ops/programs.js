@@ -4,7 +4,7 @@
 // confirmation. Results show inline. The runtime decides (docs/runtime.md); a refusal is its words.
 
 import { el, clear, setText } from '../dom.js';
-import { command, isEngineer } from './commands.js';
+import { command, isEngineer } from '../commands.js';
 import { showDialog, dialogHeading } from '../dialog_box.js';
 
 const VERBS = {

@@ -3,7 +3,7 @@
 
 import { el, clear, setText } from '../dom.js';
 import { formatValue } from '../format.js';
-import { command } from '../ops/commands.js';
+import { command } from '../commands.js';
 
 const PAGE = 200;  // rows asked for at a time ("More" asks for the next ones)
 const SOURCES = ['hmi', 'opcua', 'modbus', 'cli'];

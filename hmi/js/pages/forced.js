@@ -5,7 +5,7 @@ import { el, clear, setText } from '../dom.js';
 import { tagMeta, allTagMeta } from '../api.js';
 import { formatWithUnit, formatTime } from '../format.js';
 import { forcedMark, showForced, listForces, openForce, openUnforce } from '../ops/forcing.js';
-import { isEngineer } from '../ops/commands.js';
+import { isEngineer } from '../commands.js';
 
 export async function mount(root, ctx) {
   const engineer = isEngineer(ctx.session);
