@@ -17,7 +17,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -33,6 +32,7 @@ from softplc.online_diff import ConfigDiff, diff_configs
 from softplc.origin import Origin
 from softplc.program import Program, ProgramContext
 from softplc.program_instance import ProgramInstance, ProgramState
+from softplc.realtime import shorten_switch_interval
 from softplc.scan import ScanEngine, Task
 from softplc.scan_gate import ScanGate
 from softplc.yamlsource import ConfigError
@@ -40,9 +40,8 @@ from softplc.yamlsource import ConfigError
 log = logging.getLogger(__name__)
 
 # While the check runs in its thread, the scan's thread must get the interpreter lock back
-# quickly when a cycle is due: Python hands it over only every `switchinterval` (5 ms by default).
-CHECK_SWITCH_INTERVAL = 0.0005
-# ... and the check steps aside whenever a cycle is due (softplc/scan_gate.py). bench/online_change.py
+# quickly when a cycle is due: the switch interval is shortened (softplc/realtime.py, as for the
+# stores' writer threads) and the check steps aside whenever a cycle is due (softplc/scan_gate.py). bench/online_change.py
 # --no-gate shows why: without it the 10 ms task's median start latency grows from ~0.01 to ~1-2.5 ms.
 USE_SCAN_GATE = True
 CHECK_TIMEOUT = 60.0  # a new version's setup() that never returns: the engineer is told, not left waiting
@@ -142,17 +141,13 @@ class OnlineChange:
     def _prepare(self) -> Prepared:
         """Check the file with fresh program modules and set up each changed program's new version."""
         prepared = Prepared()
-        previous = sys.getswitchinterval()
         gate: contextlib.AbstractContextManager[Any] = contextlib.nullcontext()
         if not self.runtime.clock.simulated:
-            sys.setswitchinterval(CHECK_SWITCH_INTERVAL)
+            shorten_switch_interval()
         if self._gate is not None:  # a worker thread: keep the interpreter lock free for the scan
             gate = self._gate.worker()
-        try:
-            with gate:
-                return self._check(prepared)
-        finally:
-            sys.setswitchinterval(previous)
+        with gate:
+            return self._check(prepared)
 
     def _check(self, prepared: Prepared) -> Prepared:
         """The file checked with fresh modules, the differences, and the new versions set up (warm)."""

@@ -13,7 +13,6 @@ release skips the missed releases and counts them as overruns; it never bursts t
 from __future__ import annotations
 
 import asyncio
-import logging
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -27,7 +26,6 @@ from softplc.tagdb import TagDatabase
 
 __all__ = ["NEVER", "CurrentScan", "ProgramInstance", "ProgramState", "RestartPolicy", "ScanEngine", "Task", "TaskStats"]
 
-log = logging.getLogger(__name__)
 
 
 @dataclass

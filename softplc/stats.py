@@ -57,11 +57,6 @@ class TimingSeries:
         difference = b - a
         return b - difference * (1.0 - t) if t >= 0.5 else a + difference * t  # numpy's _lerp
 
-    @property
-    def filled(self) -> int:
-        """How many recent samples the window holds."""
-        return self._filled
-
     def recent(self, count: int) -> Any:
         """The last `count` samples (at most the window's), oldest first, as a numpy array (a copy)."""
         import numpy as np
