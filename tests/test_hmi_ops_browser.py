@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import csv
 import io
+import json
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -156,6 +157,32 @@ async def test_an_engineer_forces_and_unforces_from_a_tags_details(browser: Any,
         await wait_until(lambda: not plant.db["limit"].forced and plant.db.value("limit") == before, message="restored")
         assert not unexpected(errors), errors
     await context.close()
+
+
+async def test_a_page_with_a_forced_tag_subscribes_once_not_at_every_snapshot(browser: Any, plant: Plant) -> None:
+    """The forced banner re-watches the forced tags when `_sys.forced` arrives: the same names must
+    not be subscribed again (each subscribe costs a snapshot, which carries `_sys.forced` again)."""
+    await plant.runtime.commands.call("tags.force", {"tag": "t02_iBM", "value": 12}, ENGINEER)
+    context = await browser.new_context(viewport={"width": 1280, "height": 800})
+    page = await context.new_page()
+    sent: list[str] = []
+    received: list[str] = []
+
+    def socket(ws: Any) -> None:
+        ws.on("framesent", lambda frame: sent.append(json.loads(frame)["type"]))
+        ws.on("framereceived", lambda frame: received.append(json.loads(frame)["type"]))
+
+    page.on("websocket", socket)
+    try:
+        await page.goto(plant.url + "#/overview")
+        await ready(page)
+        await page.wait_for_selector(".forced-banner:not([hidden])")
+        subscribed, heard = sent.count("subscribe"), len(received)
+        await wait_until(lambda: len(received) >= heard + 10, timeout=10, message="ten more messages on the live channel")
+        assert sent.count("subscribe") == subscribed, sent
+    finally:
+        await context.close()
+        await plant.runtime.commands.call("tags.unforce", {"tag": "t02_iBM"}, ENGINEER)
 
 
 async def test_viewers_and_operators_get_no_controls_and_the_api_refuses_them(browser: Any, plant: Plant) -> None:

@@ -37,7 +37,7 @@ export class Live extends EventTarget {
     socket.addEventListener('open', () => {
       if (socket !== this._socket) return;
       this._lastHeard = performance.now();
-      this._sendSubscription();
+      this._sendSubscription(true);
     });
     socket.addEventListener('message', (event) => {
       if (socket !== this._socket) return;
@@ -120,11 +120,18 @@ export class Live extends EventTarget {
     queueMicrotask(() => { this._pendingSubscribe = false; this._sendSubscription(); });
   }
 
-  _sendSubscription() {
+  /** Send the watched names; unless `always` (a new socket), only when they differ from the last sent. */
+  _sendSubscription(always = false) {
     const socket = this._socket;
     if (!socket || socket.readyState !== WebSocket.OPEN) return;
+    const names = this._index;
+    const sent = this._subscribed;
+    // A page that re-watches the same names (a banner refreshing, a list re-rendering) must not
+    // cost a fresh snapshot of all of them: the server would send one for every subscribe.
+    if (!always && sent && sent.size === names.size && [...names.keys()].every((name) => sent.has(name))) return;
+    this._subscribed = new Set(names.keys());
     this.synced = false;
-    socket.send(JSON.stringify({ type: 'subscribe', items: [...this._index.keys()] }));
+    socket.send(JSON.stringify({ type: 'subscribe', items: [...this._subscribed] }));
   }
 
   _receive(text) {
