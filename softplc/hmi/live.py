@@ -134,6 +134,8 @@ class Hub:
             await self._wake.wait()
             self._wake.clear()
             batches, self._incoming = self._incoming, []
+            if not self.groups:  # no browser watches anything: no turns to take
+                continue
             due: dict[Group, None] = {}
             for tags in batches:
                 for start in range(0, len(tags), DISPATCH_SLICE):

@@ -30,10 +30,7 @@ class Pacer:
     async def turn(self) -> AsyncIterator[None]:
         """Hold the HMI's one turn; entered when no scan cycle is due within the guard."""
         async with self._lock:
-            if self.clock.simulated:
-                await asyncio.sleep(0)
-            else:
-                await self.clock.sleep(0)  # RealClock: waits for a cycle due within 5 ms to run first
+            await self.ready()
             yield
 
     async def ready(self) -> None:

@@ -31,7 +31,7 @@ from softplc.hmi.operations import install_operations
 from softplc.hmi.plant import PlantModel
 from softplc.hmi.security import OriginPolicy, middleware
 from softplc.hmi.sessions import Sessions
-from softplc.hmi.settings import HmiSettings, hmi_problems
+from softplc.hmi.settings import HmiSettings, settings_problems
 from softplc.hmi.shell import Shell, builtin_pages
 from softplc.hmi.supervisory import add_supervisory
 from softplc.hmi.views import View, load_views
@@ -55,12 +55,13 @@ class HmiServer:
     name = "hmi"
 
     def __init__(self, config: PlantConfig, settings: HmiSettings | None = None) -> None:
-        problems = hmi_problems(config)
+        views, view_problems = load_views(config)  # read and compiled once: the same check as hmi_problems
+        problems = [*settings_problems(config), *view_problems]
         if problems:
             raise ConfigError(problems)
         self.config = config
         self.settings = settings or HmiSettings.from_config(config)
-        self.views: dict[str, View] = {view.name: view for view in load_views(config)[0]}
+        self.views: dict[str, View] = {view.name: view for view in views}
         self.shell = Shell()
         install_operations(self)  # forcing, program control, online change, the audit page (operations.py)
         self.url = ""
