@@ -26,7 +26,6 @@ from softplc.commands import CommandRefused
 from softplc.opcua.login import LoginError, add_login_arguments, login_from_args
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
-_LOGIN_STATUS = {"connect": EXIT_NO_CONNECTION, "refused": EXIT_NOT_ALLOWED, "usage": EXIT_USAGE}
 TABLE_LIMIT = 100  # rows a table shows unless --limit says otherwise (csv and json: every row)
 PAGE = 1000  # rows per audit.query call
 HEADER = ("time (UTC)", "source", "user", "peer", "tag / command", "old", "new", "result")
@@ -182,7 +181,7 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
     try:
         login = login_from_args(args)
     except LoginError as error:
-        raise _Failure(str(error), _LOGIN_STATUS[error.kind]) from None
+        raise _Failure(str(error), error.exit_status) from None
 
     async def session() -> list[dict[str, Any]]:
         from softplc.live.session import NotSoftplc, open_live_session
@@ -212,7 +211,7 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
     try:
         return asyncio.run(session())
     except LoginError as error:
-        raise _Failure(str(error), _LOGIN_STATUS[error.kind]) from None
+        raise _Failure(str(error), error.exit_status) from None
     except (OSError, asyncio.TimeoutError, ConnectionError) as error:
         raise _Failure(f"lost the connection to {login.endpoint}: {error or type(error).__name__}", EXIT_NO_CONNECTION) from None
 

@@ -37,18 +37,13 @@ from softplc.fleet.loop import ControlLoop
 from softplc.fleet.peers import PEER_TAGS, PeerView
 from softplc.fleet.protocol import Answer, Registration, encode_report
 from softplc.fleet.robots import RobotFile, unknown_id_message
+from softplc.opcua.login import REFUSALS
 
 log = logging.getLogger(__name__)
 
 DEFAULT_NAMESPACE = "urn:softplc:tags"
 ANSWER_TIMEOUT = 10.0  # s the runtime has to answer a registration (it answers within a scan cycle)
-# What a server answers when it will not have this client: wrong password, an identity or
-# certificate it does not accept, or a user who may not write.
-LOGIN_REFUSALS = frozenset({
-    ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadIdentityTokenInvalid, ua.StatusCodes.BadIdentityTokenRejected,
-    ua.StatusCodes.BadCertificateUntrusted, ua.StatusCodes.BadCertificateInvalid, ua.StatusCodes.BadCertificateTimeInvalid,
-    ua.StatusCodes.BadCertificateUriInvalid, ua.StatusCodes.BadSecurityChecksFailed,
-})
+LOGIN_REFUSALS = frozenset(getattr(ua.StatusCodes, name) for name in REFUSALS)  # softplc/opcua/login.py
 
 
 class AgentError(Exception):

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, partitioned_spans, span_problems, storage_problems
-from softplc.yamlsource import Location, Problem
+from softplc.yamlsource import Problem
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
@@ -274,7 +274,3 @@ def problems(config: PlantConfig, definitions: Sequence[TagDef] | None = None) -
                     shown = ", ".join(unbounded[:3]) + (f" and {len(unbounded) - 3} more" if len(unbounded) > 3 else "")
                     at(path, f"{path[-1]} {value} is a percentage of the tag's range, but {shown} has no min and max; give an absolute amount")
     return found
-
-
-def first_location(config: PlantConfig) -> Location:
-    return config.source.value(("history",)) if config.source else Location(str(config.path), 1, 1)

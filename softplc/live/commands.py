@@ -28,7 +28,6 @@ if TYPE_CHECKING:  # asyncua is imported when a command runs: `softplc --help` m
     from softplc.live.session import LiveSession
 
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
-_LOGIN_STATUS = {"connect": EXIT_NO_CONNECTION, "refused": EXIT_NOT_ALLOWED, "usage": EXIT_USAGE}
 EXAMPLES = "softplc read t01_iBL t01_qSL | softplc write t01_iFr=45 --user alice | softplc watch 't01_*' 'r0?_xpos'"
 
 
@@ -126,7 +125,7 @@ def _run(command: str, args: argparse.Namespace, body: Callable[[LiveSession], A
     try:
         login = login_from_args(args)
     except LoginError as error:
-        return _fail(command, str(error), _LOGIN_STATUS[error.kind])
+        return _fail(command, str(error), error.exit_status)
 
     async def session() -> int:
         from softplc.live.session import NotSoftplc, UnknownTags, open_live_session
@@ -142,7 +141,7 @@ def _run(command: str, args: argparse.Namespace, body: Callable[[LiveSession], A
     try:
         return asyncio.run(session())
     except LoginError as error:
-        return _fail(command, str(error), _LOGIN_STATUS[error.kind])
+        return _fail(command, str(error), error.exit_status)
     except (OSError, asyncio.TimeoutError, ConnectionError) as error:
         return _fail(command, f"lost the connection to {login.endpoint}: {error or type(error).__name__}", EXIT_NO_CONNECTION)
 

@@ -291,7 +291,9 @@ async def _close(client: Client) -> None:
         client.disconnect_socket()
 
 
-_REFUSALS = {
+# What a server answers when it will not have this client (wrong password, an identity or a
+# certificate it does not accept): not worth retrying. The robot agent refuses on the same list.
+REFUSALS = {
     "BadUserAccessDenied": "login refused: wrong user name or password, or too many failed logins from here (wait a minute)",
     "BadIdentityTokenInvalid": "login refused: this server does not accept that kind of login",
     "BadIdentityTokenRejected": "login refused: wrong user name or password",
@@ -299,6 +301,7 @@ _REFUSALS = {
     "BadSecurityChecksFailed": "the server refused this client's certificate or security settings",
     "BadCertificateInvalid": "the server refused this client's certificate as invalid",
     "BadCertificateTimeInvalid": "this client's certificate has expired or is not valid yet",
+    "BadCertificateUriInvalid": "the server refused this client's certificate: its application URI is not the one the client gives",
     "BadSecurityPolicyRejected": "the server does not offer this security mode here",
 }
 
@@ -306,14 +309,14 @@ _REFUSALS = {
 def _is_refusal(code: int) -> bool:
     from asyncua import ua
 
-    return ua.StatusCode(code).name in _REFUSALS
+    return ua.StatusCode(code).name in REFUSALS
 
 
 def _refusal(login: Login, code: int, certificate: object) -> str:
     from asyncua import ua
 
     name = ua.StatusCode(code).name
-    text = _REFUSALS.get(name)
+    text = REFUSALS.get(name)
     if text is None:
         return f"cannot open a session on {login.endpoint}: {name}"
     text = f"{login.endpoint}: {text} ({name})"

@@ -104,7 +104,6 @@ class TagSubscription(InternalSubscription):
         self.guard = guard
         self.monitored_item_srv: TagMonitoredItems = TagMonitoredItems(self, aspace)
         self.dormant = False
-        self.naps = 0  # how often it went dormant (diagnostics, tests)
         self._starved_since: float | None = None
         self._waking: asyncio.Task[None] | None = None
 
@@ -148,7 +147,6 @@ class TagSubscription(InternalSubscription):
         """Stop sampling: detach every data-change item from the address space."""
         if not self.dormant:
             self.dormant = True
-            self.naps += 1
             self.monitored_item_srv.detach()
 
     def wake(self) -> None:
