@@ -84,14 +84,12 @@ def cmd_apply(args: argparse.Namespace) -> int:
 
 async def apply(login: Login, *, check: bool) -> Any:
     """Call programs.apply on the runtime `login` reaches; its result, or ApplyError with the status."""
-    from softplc.live.session import LiveSession, NotSoftplc
+    from softplc.live.session import NotSoftplc, open_live_session
     from softplc.opcua.door_client import CommandError, call_command
-    from softplc.opcua.login import connect
 
-    client = await connect(login)
     try:
-        live = await LiveSession.open(client, login.namespace)
-        return await call_command(client, live.ns, "programs.apply", {"check": True} if check else {})
+        async with open_live_session(login) as live:
+            return await call_command(live.client, live.ns, "programs.apply", {"check": True} if check else {})
     except NotSoftplc as error:
         raise ApplyError(f"{login.endpoint}: {error}", EXIT_NO_CONNECTION) from None
     except CommandError as error:
@@ -105,11 +103,6 @@ async def apply(login: Login, *, check: bool) -> Any:
         raise ApplyError(str(error), status, runtime_words=True) from None
     except (OSError, asyncio.TimeoutError, ConnectionError) as error:
         raise ApplyError(f"lost the connection to {login.endpoint}: {error or type(error).__name__}", EXIT_NO_CONNECTION) from None
-    finally:
-        try:
-            await asyncio.wait_for(client.disconnect(), 4)
-        except Exception:  # the server is gone already: nothing to close politely
-            client.disconnect_socket()
 
 
 def report(result: dict[str, Any]) -> str:

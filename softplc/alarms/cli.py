@@ -241,31 +241,24 @@ def _run(args: argparse.Namespace, calls: list[tuple[str, dict[str, Any]]], jour
 
 
 async def _session(login: Login, calls: list[tuple[str, dict[str, Any]]], journal: Journal | None) -> tuple[int, list[Any]]:
-    from softplc.live.session import LiveSession, NotSoftplc
-    from softplc.opcua.door_client import CommandError, call_command
-    from softplc.opcua.login import connect
+    from softplc.live.session import NotSoftplc, open_live_session
+    from softplc.opcua.door_client import CommandError, call_command, call_pages
 
-    client = await connect(login)
     results: list[Any] = []
     status = EXIT_OK
     try:
-        live = await LiveSession.open(client, login.namespace)
-        for name, arguments in calls:
-            try:
-                results.append(await call_command(client, live.ns, name, arguments))
-            except CommandError as error:
-                if error.no_door:
-                    raise
-                status = max(status, EXIT_NOT_ALLOWED if error.not_allowed else EXIT_REFUSED)
-                print(f"softplc alarms: refused: {_refusal(error, login.user)}", file=sys.stderr)
-        if journal is not None:
-            query, wanted = journal
-            while len(results) < wanted:
-                limit = int(min(JOURNAL_PAGE, wanted - len(results)))
-                page = await call_command(client, live.ns, "alarms.journal", {**query, "limit": limit, "offset": len(results)})
-                results.extend(page)
-                if len(page) < JOURNAL_PAGE:
-                    break
+        async with open_live_session(login) as live:
+            for name, arguments in calls:
+                try:
+                    results.append(await call_command(live.client, live.ns, name, arguments))
+                except CommandError as error:
+                    if error.no_door:
+                        raise
+                    status = max(status, EXIT_NOT_ALLOWED if error.not_allowed else EXIT_REFUSED)
+                    print(f"softplc alarms: refused: {_refusal(error, login.user)}", file=sys.stderr)
+            if journal is not None:
+                query, wanted = journal
+                results += await call_pages(live.client, live.ns, "alarms.journal", query, wanted, JOURNAL_PAGE)
         return status, results
     except NotSoftplc as error:
         print(f"softplc alarms: {login.endpoint}: {error}", file=sys.stderr)
@@ -277,11 +270,6 @@ async def _session(login: Login, calls: list[tuple[str, dict[str, Any]]], journa
     except (OSError, asyncio.TimeoutError, ConnectionError) as error:
         print(f"softplc alarms: lost the connection to {login.endpoint}: {error or type(error).__name__}", file=sys.stderr)
         return EXIT_NO_CONNECTION, []
-    finally:
-        try:
-            await asyncio.wait_for(client.disconnect(), login.timeout)
-        except Exception:  # the server is gone already: nothing to close politely
-            client.disconnect_socket()
 
 
 def _refusal(error: Exception, user: str | None) -> str:

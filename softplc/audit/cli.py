@@ -185,18 +185,11 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
 
     async def session() -> list[dict[str, Any]]:
         from softplc.live.session import NotSoftplc, open_live_session
-        from softplc.opcua.door_client import CommandError, call_command
+        from softplc.opcua.door_client import CommandError, call_pages
 
         try:
             async with open_live_session(login) as live:
-                rows: list[dict[str, Any]] = []
-                while len(rows) < wanted:
-                    limit = int(min(PAGE, wanted - len(rows)))
-                    page = await call_command(live.client, live.ns, "audit.query", {**arguments, "limit": limit, "offset": len(rows)})
-                    rows += page
-                    if len(page) < PAGE:
-                        break
-                return rows
+                return await call_pages(live.client, live.ns, "audit.query", arguments, wanted, PAGE)
         except NotSoftplc as error:
             raise _Failure(f"{login.endpoint}: {error}", EXIT_NO_CONNECTION) from None
         except CommandError as error:

@@ -63,3 +63,14 @@ async def call_command(client: Client, namespace_index: int, name: str, argument
     if not answer.get("ok"):
         raise CommandError(name, str(answer.get("error", "refused")))
     return answer.get("result")
+
+
+async def call_pages(client: Client, namespace_index: int, name: str, query: dict[str, Any], wanted: float, page: int) -> list[Any]:
+    """Up to `wanted` rows of a listing command that takes `limit` and `offset`, `page` rows per call."""
+    rows: list[Any] = []
+    while len(rows) < wanted:
+        got = await call_command(client, namespace_index, name, {**query, "limit": int(min(page, wanted - len(rows))), "offset": len(rows)})
+        rows += got
+        if len(got) < page:
+            break
+    return rows
