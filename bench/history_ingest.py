@@ -29,7 +29,7 @@ from bench.timing import load_average  # noqa: E402
 from softplc.adapters import build_adapters  # noqa: E402
 from softplc.clock import RealClock  # noqa: E402
 from softplc.config import parse_config  # noqa: E402
-from softplc.durations import parse_duration  # noqa: E402
+from softplc.util.durations import parse_duration  # noqa: E402
 from softplc.runtime import Runtime  # noqa: E402
 
 SUPPORT = REPO / "tests" / "history_support.py"

@@ -41,7 +41,8 @@ import yaml
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from softplc import online_change, realtime  # noqa: E402
+from softplc import online_change  # noqa: E402
+from softplc.util import realtime  # noqa: E402
 from softplc.adapters import build_adapters  # noqa: E402
 from softplc.cli import build_parser  # noqa: E402
 from softplc.clock import RealClock  # noqa: E402

@@ -189,7 +189,7 @@ async def _measure(args: argparse.Namespace) -> tuple[Recorder, dict[str, float]
     from softplc.cli import build_parser
     from softplc.clock import RealClock
     from softplc.opcua import OpcUaServer
-    from softplc.realtime import use_normal_priority_executor
+    from softplc.util.realtime import use_normal_priority_executor
     from softplc.runtime import Runtime
 
     if args.rt_priority is not None:
@@ -267,7 +267,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     logging.basicConfig(level=logging.ERROR)
     if args.rt_priority is not None:
-        from softplc.realtime import set_realtime_priority
+        from softplc.util.realtime import set_realtime_priority
 
         set_realtime_priority(args.rt_priority)
     mode = f"SCHED_FIFO priority {args.rt_priority}" if args.rt_priority is not None else "normal scheduling"

@@ -42,8 +42,8 @@ from softplc.cli import build_parser  # noqa: E402
 from softplc.clock import RealClock  # noqa: E402
 from softplc.config import ProgramConfig, TaskConfig, load_config  # noqa: E402
 from softplc.datatypes import DataType  # noqa: E402
-from softplc.durations import format_duration, parse_duration  # noqa: E402
-from softplc.realtime import set_realtime_priority, use_normal_priority_executor  # noqa: E402
+from softplc.util.durations import format_duration, parse_duration  # noqa: E402
+from softplc.util.realtime import set_realtime_priority, use_normal_priority_executor  # noqa: E402
 from softplc.runtime import Runtime  # noqa: E402
 from softplc.scan import RestartPolicy  # noqa: E402
 from softplc.tags import TagDef  # noqa: E402

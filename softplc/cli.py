@@ -20,11 +20,12 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from softplc import __version__, logs
+from softplc import __version__
+from softplc.util import logs
 from softplc.clock import RealClock, SimClock
 from softplc.config import PlantConfig, load_config
-from softplc.console import print_table
-from softplc.durations import format_duration
+from softplc.util.console import print_table
+from softplc.util.durations import format_duration
 from softplc.expression import Condition, ExpressionError
 from softplc.sections import editor_schema
 from softplc.yamlsource import ConfigError
@@ -254,7 +255,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             return EXIT_FAILURE
         loop_factory = uvloop.new_event_loop
     if args.rt_priority is not None:
-        from softplc.realtime import RealtimeError, set_realtime_priority
+        from softplc.util.realtime import RealtimeError, set_realtime_priority
 
         try:
             set_realtime_priority(args.rt_priority)
@@ -285,7 +286,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     async def main_async() -> str:
         loop = asyncio.get_running_loop()
         if args.rt_priority is not None:
-            from softplc.realtime import use_normal_priority_executor
+            from softplc.util.realtime import use_normal_priority_executor
 
             use_normal_priority_executor(loop)
         signals.attach(loop)  # a signal that came before (e.g. while the loop was created) stops the run now

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from softplc.passwords import dummy_hash, verify_password
-from softplc.peers import PeerLog
+from softplc.util.peers import PeerLog
 
 if TYPE_CHECKING:
     from softplc.users import UserEntry, UserStore

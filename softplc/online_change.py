@@ -32,7 +32,7 @@ from softplc.online_diff import ConfigDiff, diff_configs
 from softplc.origin import Origin
 from softplc.program import Program, ProgramContext
 from softplc.program_instance import ProgramInstance, ProgramState
-from softplc.realtime import shorten_switch_interval
+from softplc.util.realtime import shorten_switch_interval
 from softplc.scan import ScanEngine, Task
 from softplc.scan_gate import ScanGate
 from softplc.yamlsource import ConfigError
@@ -40,7 +40,7 @@ from softplc.yamlsource import ConfigError
 log = logging.getLogger(__name__)
 
 # While the check runs in its thread, the scan's thread must get the interpreter lock back
-# quickly when a cycle is due: the switch interval is shortened (softplc/realtime.py, as for the
+# quickly when a cycle is due: the switch interval is shortened (softplc/util/realtime.py, as for the
 # stores' writer threads) and the check steps aside whenever a cycle is due (softplc/scan_gate.py). bench/online_change.py
 # --no-gate shows why: without it the 10 ms task's median start latency grows from ~0.01 to ~1-2.5 ms.
 USE_SCAN_GATE = True

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from softplc.config.plant import PlantConfig, ProgramConfig
-from softplc.durations import format_duration
+from softplc.util.durations import format_duration
 
 CORE_KEYS = ("version", "templates", "tags", "tasks")
 _TAG_FIELDS = ("type", "initial", "unit", "description", "access", "min", "max", "retain", "group", "options")

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from softplc.clock import Clock
-from softplc.durations import parse_duration
+from softplc.util.durations import parse_duration
 
 _MISSING: Any = object()
 

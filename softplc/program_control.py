@@ -22,7 +22,7 @@ from softplc.commands import CommandRefused, Commands, Permission
 from softplc.origin import Origin
 from softplc.program_instance import ProgramInstance, ProgramState
 from softplc.scan import Task
-from softplc.suggest import did_you_mean
+from softplc.util.suggest import did_you_mean
 
 
 class _Runtime(Protocol):

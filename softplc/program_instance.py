@@ -20,7 +20,7 @@ from typing import Any
 
 from softplc.fault_reaction import FaultReaction
 from softplc.function_blocks import warm_start
-from softplc.log_format import BRIEF_TRACEBACK
+from softplc.util.log_format import BRIEF_TRACEBACK
 from softplc.program import Direction, Program, program_log
 from softplc.tagdb import Rule, TagDatabase, WriteRejected
 
@@ -116,7 +116,7 @@ class ProgramInstance:
             self.error = f"{type(error).__name__}: {error}{where}"
         else:
             self.error = error
-        # Under the program's own logger; the traceback is shown with -v (softplc.log_format).
+        # Under the program's own logger; the traceback is shown with -v (softplc.util.log_format).
         program_log(self.name).error("program %s FAULTED: %s", self.name, self.error,
                                      exc_info=error if isinstance(error, BaseException) else None,
                                      extra={BRIEF_TRACEBACK: True})

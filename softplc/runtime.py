@@ -21,7 +21,7 @@ from typing import Any, Protocol
 from softplc.clock import Clock, RealClock, SimClock
 from softplc.commands import Commands
 from softplc.config import PlantConfig
-from softplc.durations import parse_duration
+from softplc.util.durations import parse_duration
 from softplc.events import EventBus
 from softplc.expression import Condition
 from softplc.online_change import OnlineChange

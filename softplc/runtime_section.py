@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from softplc.durations import check_duration
+from softplc.util.durations import check_duration
 from softplc.schema import DURATION, Section
 
 if TYPE_CHECKING:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from softplc.datatypes import TYPE_NAMES
-from softplc.durations import DURATION_REGEX
+from softplc.util.durations import DURATION_REGEX
 
 if TYPE_CHECKING:
     from softplc.tags import TagDef

@@ -34,7 +34,7 @@ def _log_summaries_stay_with_their_test():
     test) would find another test's summary in its stderr — which test depends on the order.
     """
     yield
-    from softplc.logs import flush_summaries
+    from softplc.util.logs import flush_summaries
 
     flush_summaries()
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from softplc.datatypes import DataType
-from softplc.durations import check_duration
+from softplc.util.durations import check_duration
 from softplc.schema import DURATION, Section
 from softplc.tags import Access, TagDef
 

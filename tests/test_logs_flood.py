@@ -1,10 +1,10 @@
-"""The flood limit itself (softplc/log_limit.py), on a clock the test turns: kinds, the per-logger cap, summaries."""
+"""The flood limit itself (softplc/util/log_limit.py), on a clock the test turns: kinds, the per-logger cap, summaries."""
 
 from __future__ import annotations
 
 import logging
 
-from softplc.log_limit import FloodFilter
+from softplc.util.log_limit import FloodFilter
 
 
 class Clock:

@@ -7,7 +7,7 @@ is the plain data model, `softplc.alarms.model`.
 
 from typing import TYPE_CHECKING
 
-from softplc.lazy import lazy_exports
+from softplc.util.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.alarms.model import AlarmSnapshot, AlarmState, Priority, Transition

@@ -13,7 +13,7 @@ from softplc.alarms.model import (
     AlarmRefused, AlarmSnapshot, NothingToAcknowledge, NotShelved, ServiceUnchanged, Shelving, ShelveKind, ShelvingTimeOutOfRange, Transition,
     Trigger, next_state,
 )
-from softplc.durations import format_duration
+from softplc.util.durations import format_duration
 from softplc.tagdb import Origin
 
 

@@ -130,7 +130,7 @@ def cmd_list(args: argparse.Namespace) -> int:
     if args.format == "json":
         print(json.dumps(alarms, indent=2))
         return EXIT_OK
-    from softplc.console import print_table
+    from softplc.util.console import print_table
 
     rows = [[alarm["name"], alarm["state"], alarm["priority"], _when(alarm.get("since")), alarm["message"]] for alarm in alarms]
     if rows:
@@ -204,7 +204,7 @@ def cmd_journal(args: argparse.Namespace) -> int:
         if args.out:
             print(f"wrote {len(rows)} journal rows to {args.out}", file=sys.stderr)
         return EXIT_OK
-    from softplc.console import print_table
+    from softplc.util.console import print_table
 
     table = [[_when(row["time"]), row["alarm"], row["transition"], row["state"], row["user"], row["comment"] or row["message"]] for row in rows]
     if table:
@@ -302,7 +302,7 @@ def _time(text: str | None, option: str) -> float | None:
     """Epoch seconds of an ISO time, or of now minus a duration ('8h', '30min')."""
     if not text:
         return None
-    from softplc.durations import parse_duration
+    from softplc.util.durations import parse_duration
 
     try:
         return datetime.now().timestamp() - parse_duration(text)

@@ -30,7 +30,7 @@ from softplc.alarms.journal import AlarmJournal, JournalQuery
 from softplc.alarms.model import AlarmState, Priority
 from softplc.clock import Clock
 from softplc.commands import CommandRefused, Commands, Permission
-from softplc.durations import parse_duration
+from softplc.util.durations import parse_duration
 from softplc.storage.command_search import search_for_command
 from softplc.tagdb import Origin
 

@@ -27,7 +27,7 @@ from softplc.alarms.model import (
 from softplc.alarms.settings import AlarmDefinition, AlarmSettings
 from softplc.clock import Clock
 from softplc.events import Event
-from softplc.suggest import did_you_mean
+from softplc.util.suggest import did_you_mean
 from softplc.tagdb import Origin, TagDatabase
 from softplc.tags import Tag
 

@@ -19,7 +19,7 @@ from typing import IO, Any
 
 from softplc.events import Event
 from softplc.storage import BatchWriter, Database, escape_like, like_pattern, plant_and_time
-from softplc.timestamps import format_utc
+from softplc.util.timestamps import format_utc
 
 TABLE = "alarm_journal"
 MAX_ROWS = 10_000  # most rows one search returns

@@ -7,7 +7,7 @@ entry and its row), `store` (time-partitioned tables, the writer-side sink, rete
 (`softplc audit`). See docs/operations.md, "Audit trail". The core never imports this package.
 """
 
-from softplc.lazy import lazy_exports
+from softplc.util.lazy import lazy_exports
 
 # Imported on first use: the section module is loaded with every configuration, so this
 # package must stay light.

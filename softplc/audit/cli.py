@@ -225,7 +225,7 @@ def _show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> None:
 
             write_csv((AuditEntry.from_dict(row) for row in rows), stream)
         elif rows:
-            from softplc.console import print_table
+            from softplc.util.console import print_table
 
             table = [[row["time_utc"].replace("T", " ").rstrip("Z"), row["source"], row["user"], row["peer"], _what(row),
                       format_value(row["old"]), format_value(row["new"]), _result(row)] for row in rows]

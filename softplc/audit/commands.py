@@ -20,7 +20,7 @@ from softplc.clock import Clock
 from softplc.commands import CommandRefused, Commands, Permission
 from softplc.storage.command_search import Searchable, search_for_command
 from softplc.tagdb import Origin
-from softplc.timestamps import parse_utc
+from softplc.util.timestamps import parse_utc
 
 ARGUMENTS = {
     "since": "from (epoch s or ISO 8601, UTC unless a zone is given)", "until": "to, excluded (epoch s or ISO 8601)",

@@ -15,7 +15,7 @@ from typing import Any
 
 from softplc.commands import CommandCall
 from softplc.tagdb import WriteEvent
-from softplc.timestamps import format_utc
+from softplc.util.timestamps import format_utc
 
 MAX_TEXT = 4096  # longest value, argument list or detail kept (a client may send megabytes)
 _string = json.encoder.encode_basestring  # a str as JSON text, in C (as json.dumps(..., ensure_ascii=False))

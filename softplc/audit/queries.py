@@ -17,7 +17,7 @@ from typing import IO, Any
 from softplc.audit.entry import COLUMNS, AuditEntry, entry_of, format_value
 from softplc.audit.store import CATALOGUE, SQL_COLUMNS
 from softplc.storage import Database, like_pattern, plant_and_time
-from softplc.timestamps import format_utc
+from softplc.util.timestamps import format_utc
 
 MAX_ROWS = 10_000  # most rows one search returns
 KINDS = ("write", "command")

@@ -25,7 +25,7 @@ from softplc.audit.settings import AuditSettings
 from softplc.audit.store import SINK_NAME, AuditSink
 from softplc.clock import Clock
 from softplc.commands import CommandCall, Commands
-from softplc.realtime import shorten_switch_interval
+from softplc.util.realtime import shorten_switch_interval
 from softplc.scan_gate import ScanGate
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.tagdb import TagDatabase, WriteEvent

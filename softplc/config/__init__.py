@@ -13,8 +13,8 @@ from softplc.config.loader import check_config, load_config, parse_config
 from softplc.config.plant import SYSTEM_PREFIX, PlantConfig, ProgramConfig, TaskConfig
 from softplc.config.programs import import_program
 from softplc.config.schema_check import schema_problems
-from softplc.durations import check_duration
-from softplc.suggest import did_you_mean
+from softplc.util.durations import check_duration
+from softplc.util.suggest import did_you_mean
 
 __all__ = [
     "SYSTEM_PREFIX", "PlantConfig", "ProgramConfig", "TaskConfig", "check_config", "check_duration", "did_you_mean",

@@ -17,7 +17,7 @@ from softplc.config.findings import Findings
 from softplc.config.plant import SYSTEM_PREFIX
 from softplc.config.tags import TagChecker
 from softplc.program import Program
-from softplc.suggest import did_you_mean
+from softplc.util.suggest import did_you_mean
 
 
 @dataclass(frozen=True)

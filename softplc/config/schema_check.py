@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from softplc.schema import NAME_RULE
-from softplc.suggest import did_you_mean
+from softplc.util.suggest import did_you_mean
 from softplc.yamlsource import Problem, SourceMap
 
 if TYPE_CHECKING:

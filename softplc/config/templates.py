@@ -9,7 +9,7 @@ from typing import Any
 
 from softplc.config.findings import Findings
 from softplc.schema import NAME_PATTERN, NAME_RULE
-from softplc.suggest import did_you_mean
+from softplc.util.suggest import did_you_mean
 from softplc.yamlsource import ConfigError, Location, SourceMap, load_yaml
 
 # template → instance → tag → (initial value, where it is written), from instances_from

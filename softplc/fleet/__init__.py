@@ -34,7 +34,7 @@ by id order. Robots learn about each other only through the tags.
 
 from typing import TYPE_CHECKING
 
-from softplc.lazy import lazy_exports
+from softplc.util.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.fleet.adapter import FleetAdapter

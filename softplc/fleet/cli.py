@@ -59,7 +59,7 @@ def add_commands(subparsers: Any) -> None:
 
 def cmd_compat(args: argparse.Namespace) -> int:
     from softplc.fleet.compat import Compatibility
-    from softplc.console import print_table
+    from softplc.util.console import print_table
 
     compat = Compatibility.load(args.robots, args.tasks)
     matrix = compat.matrix()

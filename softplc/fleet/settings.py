@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from softplc.durations import parse_duration
+from softplc.util.durations import parse_duration
 from softplc.yamlsource import ConfigError
 
 if TYPE_CHECKING:

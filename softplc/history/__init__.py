@@ -7,7 +7,7 @@ values), `reads` (Part 11 reads page by page), `commands` (the `history.*` comma
 call), `export` (`softplc history export`). See docs/history.md. The core never imports this package.
 """
 
-from softplc.lazy import lazy_exports
+from softplc.util.lazy import lazy_exports
 
 __getattr__, __dir__ = lazy_exports(__name__, {
     "softplc.history.settings": ("HistorySettings", "Rule", "TagPolicy", "problems", "tag_rule"),

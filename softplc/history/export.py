@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from softplc.history.aggregates import Aggregate
-from softplc.timestamps import format_utc, parse_utc
+from softplc.util.timestamps import format_utc, parse_utc
 
 EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
 
@@ -98,7 +98,7 @@ def cmd_tags(args: argparse.Namespace) -> int:
 
 
 def _tags(args: argparse.Namespace) -> int:
-    from softplc.console import print_table
+    from softplc.util.console import print_table
 
     reader = _reader(args)
     tags = reader.historized()

@@ -21,7 +21,7 @@ from softplc.history.queries import HistoryReader
 from softplc.history.settings import HistorySettings, TagPolicy
 from softplc.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.history.swinging_door import SwingingDoor
-from softplc.realtime import shorten_switch_interval
+from softplc.util.realtime import shorten_switch_interval
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.tags import Quality, Tag
 

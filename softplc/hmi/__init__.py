@@ -13,7 +13,7 @@ folder (docs/hmi.md).
 
 from typing import TYPE_CHECKING
 
-from softplc.lazy import lazy_exports
+from softplc.util.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.hmi.server import HmiServer

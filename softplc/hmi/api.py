@@ -29,8 +29,8 @@ from aiohttp import web
 from softplc import __version__
 from softplc.hmi.fanout import wire_value
 from softplc.hmi.sessions import Identity
-from softplc.peers import peer_host
-from softplc.suggest import did_you_mean
+from softplc.util.peers import peer_host
+from softplc.util.suggest import did_you_mean
 from softplc.tagdb import Origin, Rule
 from softplc.tags import Tag
 

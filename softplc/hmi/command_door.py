@@ -25,8 +25,8 @@ from aiohttp import web
 
 from softplc.commands import CommandRefused, Permission, UnknownCommand
 from softplc.hmi.wire import json_response
-from softplc.peers import PeerLog, peer_host
-from softplc.suggest import did_you_mean
+from softplc.util.peers import PeerLog, peer_host
+from softplc.util.suggest import did_you_mean
 from softplc.tagdb import Origin
 
 if TYPE_CHECKING:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from softplc.commands import CommandRefused
-from softplc.peers import peer_host
+from softplc.util.peers import peer_host
 from softplc.tagdb import Origin
 
 if TYPE_CHECKING:

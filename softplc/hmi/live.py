@@ -38,7 +38,7 @@ from softplc.hmi.expressions import ExpressionTable
 from softplc.hmi.fanout import Client, Encoder, Group
 from softplc.hmi.pacing import Pacer
 from softplc.hmi.sessions import Identity
-from softplc.peers import PeerLog, peer_host
+from softplc.util.peers import PeerLog, peer_host
 from softplc.tagdb import TagDatabase
 from softplc.tags import Tag
 

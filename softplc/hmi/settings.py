@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from softplc.durations import parse_duration
+from softplc.util.durations import parse_duration
 from softplc.metrics.settings import METRICS_SCHEMA, metrics_problems
 from softplc.roles import Role
 

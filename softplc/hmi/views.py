@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 from softplc.datatypes import TypeMismatch
 from softplc.expression import Condition, ExpressionError
 from softplc.hmi.svg import SvgError, svg_ids
-from softplc.suggest import did_you_mean
+from softplc.util.suggest import did_you_mean
 from softplc.tags import TagDef
 
 if TYPE_CHECKING:

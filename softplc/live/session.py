@@ -20,7 +20,7 @@ from asyncua import Client, ua
 
 from softplc.datatypes import DataType
 from softplc.opcua.variants import DATA_TYPE_IDS
-from softplc.suggest import did_you_mean
+from softplc.util.suggest import did_you_mean
 from softplc.tags import Access, Quality, TagDef
 
 if TYPE_CHECKING:

@@ -13,7 +13,7 @@ dictionary increment per client write and command call, where the core reports t
 
 from typing import TYPE_CHECKING
 
-from softplc.lazy import lazy_exports
+from softplc.util.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.metrics.adapter import MetricsAdapter

@@ -28,7 +28,7 @@ from aiohttp import web
 
 from softplc.metrics.counters import CommandCounts, WriteCounts
 from softplc.metrics.settings import MetricsSettings
-from softplc.peers import PeerLog
+from softplc.util.peers import PeerLog
 
 if TYPE_CHECKING:
     from softplc.hmi.server import HmiServer

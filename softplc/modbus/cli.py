@@ -79,7 +79,7 @@ def cmd_modbus_map(args: argparse.Namespace) -> int:
         writer.writeheader()
         writer.writerows(listing)
     else:
-        from softplc.console import print_table
+        from softplc.util.console import print_table
 
         state = "" if settings.enabled else " (servers.modbus is not enabled: softplc run will not serve it)"
         print(f"Modbus TCP {settings.host}:{settings.port} unit {settings.unit_id}, word order {settings.word_order}{state}")

@@ -36,7 +36,7 @@ from pymodbus.server import ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
 
 from softplc.modbus.framing import MAX_FRAME, Frame, FrameBuffer, FramingError
-from softplc.peers import PeerLog, peer_host
+from softplc.util.peers import PeerLog, peer_host
 
 log = logging.getLogger(__name__)
 REPORT_INTERVAL = 60.0

@@ -8,7 +8,7 @@ import re
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
-from softplc.durations import parse_duration
+from softplc.util.durations import parse_duration
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

@@ -118,7 +118,7 @@ def _store(args: argparse.Namespace) -> UserStore:
 
 
 def cmd_certs(args: argparse.Namespace) -> int:
-    from softplc.console import print_table
+    from softplc.util.console import print_table
     from softplc.opcua.security import describe_file
 
     pki = _pki(args)
@@ -214,7 +214,7 @@ def _read_password(args: argparse.Namespace) -> str | None:
 
 
 def cmd_users_list(args: argparse.Namespace) -> int:
-    from softplc.console import print_table
+    from softplc.util.console import print_table
 
     store = _store(args)
     entries = store.entries()

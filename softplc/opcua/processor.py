@@ -41,7 +41,7 @@ from asyncua.server.internal_session import SessionState
 from softplc.opcua.browsing import ContinuationPoints
 from softplc.opcua.roles import SessionUser
 from softplc.opcua.subscriptions import GuardedSubscriptionService
-from softplc.peers import peer_host
+from softplc.util.peers import peer_host
 
 
 class PolicyRefused(Exception):

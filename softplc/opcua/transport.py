@@ -41,7 +41,7 @@ from asyncua.crypto.security_policies import SecurityPolicyNone
 from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
 from asyncua.ua.ua_binary import header_from_binary, uatcp_to_binary
 
-from softplc.peers import PeerLog, peer_host
+from softplc.util.peers import PeerLog, peer_host
 from softplc.opcua.methods import CheckedMethodService
 from softplc.opcua.processor import DiscoveryOnlyNone, GuardedProcessor, PolicyRefused
 from softplc.opcua.scheduling import ScanGuard

@@ -7,7 +7,7 @@
 
 from typing import TYPE_CHECKING
 
-from softplc.lazy import lazy_exports
+from softplc.util.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.scenarios.runner import RunResult, run_scenario, run_scenario_async

@@ -60,7 +60,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:  # type: ignor
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    from softplc.console import print_table
+    from softplc.util.console import print_table
 
     rows = []
     for path in builtin_scenarios():

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from softplc.durations import parse_duration
+from softplc.util.durations import parse_duration
 from softplc.yamlsource import Problem, SourceMap
 
 BACKENDS = ("sqlite", "postgresql")

@@ -8,7 +8,7 @@
   pymodbus's debug lines; `-q` only warnings and errors;
 - `--log-file PATH` writes the log there, rotated at `--log-max-size` into `--log-backups` old
   files (PATH.1 … PATH.N); the console (stderr) then gets only warnings and errors;
-- every handler rate-limits lines per kind (`softplc.log_limit`), so no client can flood the log.
+- every handler rate-limits lines per kind (`softplc.util.log_limit`), so no client can flood the log.
 
 The options are accepted before the command (`softplc -v run`) and after it (`softplc run -v`).
 """
@@ -25,8 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from softplc.log_format import JsonFormatter, PlantTime, TextFormatter
-from softplc.log_limit import DEFAULT_BURST, DEFAULT_INTERVAL, DEFAULT_LOGGER_BURST, FloodFilter
+from softplc.util.log_format import JsonFormatter, PlantTime, TextFormatter
+from softplc.util.log_limit import DEFAULT_BURST, DEFAULT_INTERVAL, DEFAULT_LOGGER_BURST, FloodFilter
 
 if TYPE_CHECKING:
     from softplc.clock import Clock
@@ -52,7 +52,7 @@ class LogOptions:
     file: Path | None = None
     max_bytes: int = DEFAULT_MAX_BYTES
     backups: int = DEFAULT_BACKUPS
-    burst: int = DEFAULT_BURST  # lines of one kind per interval (softplc.log_limit)
+    burst: int = DEFAULT_BURST  # lines of one kind per interval (softplc.util.log_limit)
     logger_burst: int = DEFAULT_LOGGER_BURST  # lines of one logger per interval
     interval: float = DEFAULT_INTERVAL
 
