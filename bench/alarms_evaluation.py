@@ -30,10 +30,10 @@ sys.path.insert(0, str(REPO))
 
 from softplc.alarms.engine import AlarmEngine  # noqa: E402
 from softplc.alarms.settings import AlarmSettings  # noqa: E402
-from softplc.clock import RealClock  # noqa: E402
+from softplc.core.clock import RealClock  # noqa: E402
 from softplc.config import parse_config  # noqa: E402
-from softplc.events import Event  # noqa: E402
-from softplc.tagdb import TagDatabase  # noqa: E402
+from softplc.core.events import Event  # noqa: E402
+from softplc.core.tagdb import TagDatabase  # noqa: E402
 
 ALARMS = {
     "limit": '{name: "{sensor}_hi", for_each: sensor, limit: {tag: "{sensor}_v", hi: 90, hihi: 95, lo: 5, deadband: 2}}',

@@ -29,7 +29,7 @@ sys.path.insert(0, str(REPO))
 
 from softplc import InOut, Param, Program  # noqa: E402
 from softplc.adapters import build_adapters  # noqa: E402
-from softplc.clock import RealClock  # noqa: E402
+from softplc.core.clock import RealClock  # noqa: E402
 from softplc.config import load_config  # noqa: E402
 from softplc.runtime import Runtime  # noqa: E402
 

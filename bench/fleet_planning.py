@@ -35,7 +35,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from softplc.clock import RealClock, SimClock  # noqa: E402
+from softplc.core.clock import RealClock, SimClock  # noqa: E402
 from softplc.config import load_config  # noqa: E402
 from softplc.fleet.adapter import FleetAdapter  # noqa: E402
 from softplc.fleet.driver import PlanRequest  # noqa: E402

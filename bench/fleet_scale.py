@@ -29,7 +29,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from softplc.clock import RealClock  # noqa: E402
+from softplc.core.clock import RealClock  # noqa: E402
 from softplc.config import load_config  # noqa: E402
 from softplc.fleet.adapter import FleetAdapter  # noqa: E402
 from softplc.fleet.gridmap import OccupancyGrid  # noqa: E402

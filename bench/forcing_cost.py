@@ -7,7 +7,7 @@ CPU time around each, so the figures do not depend on the machine's load. Cases:
 
 - none: nothing forced (the baseline);
 - outputs: the 1,000 tags the program writes are forced — it reads the forced values, its writes
-  to them are dropped at the commit (the CODESYS semantics, softplc/forcing.py);
+  to them are dropped at the commit (the CODESYS semantics, softplc/core/forcing.py);
 - elsewhere: 1,000 tags no program binds are forced (the cost of the forces themselves);
 
 and, once, what setting and releasing 1,000 forces costs at the cycle boundary that applies them.
@@ -29,11 +29,11 @@ sys.path.insert(0, str(REPO))
 
 from bench.timing import load_average  # noqa: E402
 from softplc import InOut, Program  # noqa: E402
-from softplc.clock import SimClock  # noqa: E402
+from softplc.core.clock import SimClock  # noqa: E402
 from softplc.config import parse_config  # noqa: E402
-from softplc.roles import Role  # noqa: E402
+from softplc.core.roles import Role  # noqa: E402
 from softplc.runtime import Runtime  # noqa: E402
-from softplc.tagdb import Origin  # noqa: E402
+from softplc.core.tagdb import Origin  # noqa: E402
 
 BOUND = 1000
 OTHER = 2000

@@ -27,7 +27,7 @@ sys.path.insert(0, str(REPO))
 
 from bench.timing import load_average  # noqa: E402
 from softplc.adapters import build_adapters  # noqa: E402
-from softplc.clock import RealClock  # noqa: E402
+from softplc.core.clock import RealClock  # noqa: E402
 from softplc.config import parse_config  # noqa: E402
 from softplc.util.durations import parse_duration  # noqa: E402
 from softplc.runtime import Runtime  # noqa: E402
@@ -111,7 +111,7 @@ def recording_cost(tags: int, rounds: int = 20) -> tuple[float, float]:
     from softplc.history.settings import TagPolicy
     from softplc.history.store import HistorySink, TagInfo
     from softplc.storage import Database, StorageSettings
-    from softplc.tags import Quality
+    from softplc.core.tags import Quality
 
     names = [f"v{index:05d}" for index in range(tags)]
     filters = [TagFilter(name, TagPolicy(), numeric=True) for name in names]

@@ -28,7 +28,7 @@ from bench.timing import load_average  # noqa: E402
 from softplc.history.queries import HistoryReader  # noqa: E402
 from softplc.history.store import HistorySink, TagInfo  # noqa: E402
 from softplc.storage import BatchWriter, Database, StorageSettings  # noqa: E402
-from softplc.tags import Quality  # noqa: E402
+from softplc.core.tags import Quality  # noqa: E402
 
 T0 = 1_767_225_600.0
 DAY = 86_400

@@ -55,7 +55,7 @@ history: {{flush_period: 1s}}
 def prefill(state: Path) -> None:
     from softplc.history.store import HistorySink, TagInfo
     from softplc.storage import BatchWriter, Database, StorageSettings
-    from softplc.tags import Quality
+    from softplc.core.tags import Quality
 
     writer = BatchWriter(Database(StorageSettings.sqlite(state / "history.sqlite")), flush_period=0.1)
     writer.register(HistorySink("reads", [TagInfo("level", "float64")]))
@@ -67,7 +67,7 @@ def prefill(state: Path) -> None:
 
 async def serve(args: argparse.Namespace, state: Path) -> None:
     from softplc.adapters import build_adapters
-    from softplc.clock import RealClock
+    from softplc.core.clock import RealClock
     from softplc.config import parse_config
     from softplc.runtime import Runtime
     from tests.opcua_support import add_users

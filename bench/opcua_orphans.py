@@ -187,7 +187,7 @@ async def _wait_line(process: asyncio.subprocess.Process, prefix: str, timeout: 
 async def _measure(args: argparse.Namespace) -> tuple[Recorder, dict[str, float]]:
     from softplc.adapters import build_adapters
     from softplc.cli import build_parser
-    from softplc.clock import RealClock
+    from softplc.core.clock import RealClock
     from softplc.opcua import OpcUaServer
     from softplc.util.realtime import use_normal_priority_executor
     from softplc.runtime import Runtime

@@ -1,10 +1,10 @@
 """softplc: a PLC-style soft controller with OPC UA, Modbus TCP and mobile robots."""
 
-from softplc.clock import Clock, RealClock, SimClock
-from softplc.datatypes import DataType
-from softplc.function_blocks import CTD, CTU, F_TRIG, R_TRIG, TOF, TON, TP
-from softplc.program import InOut, Input, Output, Param, Program
-from softplc.tags import Access, Quality, TagDef
+from softplc.core.clock import Clock, RealClock, SimClock
+from softplc.core.datatypes import DataType
+from softplc.core.function_blocks import CTD, CTU, F_TRIG, R_TRIG, TOF, TON, TP
+from softplc.core.program import InOut, Input, Output, Param, Program
+from softplc.core.tags import Access, Quality, TagDef
 
 __version__ = "0.1.0"
 

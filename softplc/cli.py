@@ -22,11 +22,11 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from softplc import __version__
 from softplc.util import logs
-from softplc.clock import RealClock, SimClock
+from softplc.core.clock import RealClock, SimClock
 from softplc.config import PlantConfig, load_config
 from softplc.util.console import print_table
 from softplc.util.durations import format_duration
-from softplc.expression import Condition, ExpressionError
+from softplc.core.expression import Condition, ExpressionError
 from softplc.sections import editor_schema
 from softplc.yamlsource import ConfigError
 

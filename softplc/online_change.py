@@ -21,16 +21,16 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from softplc.clock import Clock, wait_for
-from softplc.commands import CommandRefused, Commands, Permission
+from softplc.core.clock import Clock, wait_for
+from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.config.fresh import FreshModules, module_file, source_digest
 from softplc.config.loader import load_config
 from softplc.config.plant import PlantConfig
 from softplc.config.programs import raised_at, split_reference
-from softplc.function_blocks import warm_start
+from softplc.core.function_blocks import warm_start
 from softplc.online_diff import ConfigDiff, diff_configs
-from softplc.origin import Origin
-from softplc.program import Program, ProgramContext
+from softplc.core.origin import Origin
+from softplc.core.program import Program, ProgramContext
 from softplc.program_instance import ProgramInstance, ProgramState
 from softplc.util.realtime import shorten_switch_interval
 from softplc.scan import ScanEngine, Task

@@ -17,9 +17,9 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Protocol
 
-from softplc.clock import Clock
-from softplc.commands import CommandRefused, Commands, Permission
-from softplc.origin import Origin
+from softplc.core.clock import Clock
+from softplc.core.commands import CommandRefused, Commands, Permission
+from softplc.core.origin import Origin
 from softplc.program_instance import ProgramInstance, ProgramState
 from softplc.scan import Task
 from softplc.util.suggest import did_you_mean

@@ -2,9 +2,9 @@
 
 States: RUNNING (scanned every cycle), FAULTED (its scan or setup raised, or it stalled), STOPPED
 (disabled in the configuration, or stopped by an engineer). A fault applies the program's fault
-reaction (`softplc/fault_reaction.py`) and, with `restart: {delay, max}`, restarts it later. Every
+reaction (`softplc/core/fault_reaction.py`) and, with `restart: {delay, max}`, restarts it later. Every
 start but the plant's first is a **warm start**: `setup()` runs inside
-`softplc.function_blocks.warm_start()`, so the edge detectors it creates do not see a signal that
+`softplc.core.function_blocks.warm_start()`, so the edge detectors it creates do not see a signal that
 stayed high across the restart as a new edge; `program.restarted` says so, and
 `program.first_scan` is true in the first scan after any start.
 """
@@ -18,11 +18,11 @@ import traceback
 from dataclasses import dataclass
 from typing import Any
 
-from softplc.fault_reaction import FaultReaction
-from softplc.function_blocks import warm_start
+from softplc.core.fault_reaction import FaultReaction
+from softplc.core.function_blocks import warm_start
 from softplc.util.log_format import BRIEF_TRACEBACK
-from softplc.program import Direction, Program, program_log
-from softplc.tagdb import Rule, TagDatabase, WriteRejected
+from softplc.core.program import Direction, Program, program_log
+from softplc.core.tagdb import Rule, TagDatabase, WriteRejected
 
 
 

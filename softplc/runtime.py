@@ -18,21 +18,21 @@ from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any, Protocol
 
-from softplc.clock import Clock, RealClock, SimClock
-from softplc.commands import Commands
+from softplc.core.clock import Clock, RealClock, SimClock
+from softplc.core.commands import Commands
 from softplc.config import PlantConfig
 from softplc.util.durations import parse_duration
-from softplc.events import EventBus
-from softplc.expression import Condition
+from softplc.core.events import EventBus
+from softplc.core.expression import Condition
 from softplc.online_change import OnlineChange
-from softplc.program import ProgramContext
+from softplc.core.program import ProgramContext
 from softplc.program_control import register_program_commands
 from softplc.retain import RetainStore, open_retained
 from softplc.runtime_commands import register_runtime_commands
 from softplc.scan import ProgramInstance, ProgramState, ScanEngine, Task
 from softplc.stall import StallDetector
 from softplc.systags import SystemTags, runtime_tag_definitions
-from softplc.tagdb import TagDatabase, WriteRejected
+from softplc.core.tagdb import TagDatabase, WriteRejected
 from softplc.yamlsource import ConfigError, Location, Problem
 
 log = logging.getLogger(__name__)
@@ -369,7 +369,7 @@ class Runtime:
 
     def _note_retained(self, changed: Any) -> None:
         for tag in changed:
-            if tag.definition.retain and not tag.forced:  # forces are not retained (softplc/forcing.py)
+            if tag.definition.retain and not tag.forced:  # forces are not retained (softplc/core/forcing.py)
                 # The value now, on the loop thread: the saving thread never reads a changing tag,
                 # and a force applied later never reaches the store.
                 self._retain_dirty[tag.name] = (tag.definition.type.value, tag.value)

@@ -1,7 +1,7 @@
-"""The commands the runtime itself offers (see `softplc/commands.py`): faults and forcing.
+"""The commands the runtime itself offers (see `softplc/core/commands.py`): faults and forcing.
 
     runtime.reset_faults               operator, engineer   clear program faults and the ERROR state
-    tags.force   {tag, value}          engineer             force a tag (softplc/forcing.py)
+    tags.force   {tag, value}          engineer             force a tag (softplc/core/forcing.py)
     tags.unforce {tag, restore}        engineer             release it (restore: back to its value before)
     tags.forces                        any role             the forces in effect
 
@@ -13,10 +13,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any, Protocol
 
-from softplc.commands import CommandRefused, Commands, Permission
-from softplc.datatypes import TypeMismatch
+from softplc.core.commands import CommandRefused, Commands, Permission
+from softplc.core.datatypes import TypeMismatch
 from softplc.scan import ProgramState, Task
-from softplc.tagdb import Origin, TagDatabase, WriteRejected
+from softplc.core.tagdb import Origin, TagDatabase, WriteRejected
 
 
 class _Runtime(Protocol):

@@ -19,10 +19,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from softplc.clock import Clock
+from softplc.core.clock import Clock
 from softplc.program_instance import NEVER, ProgramInstance, ProgramState, RestartPolicy
 from softplc.stats import TimingSeries
-from softplc.tagdb import TagDatabase
+from softplc.core.tagdb import TagDatabase
 
 __all__ = ["NEVER", "CurrentScan", "ProgramInstance", "ProgramState", "RestartPolicy", "ScanEngine", "Task", "TaskStats"]
 

@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any
 
-from softplc.clock import Clock
+from softplc.core.clock import Clock
 from softplc.scan import ScanEngine, Task
 
 MARGIN = 0.002  # at least this long before a release the worker steps aside

@@ -13,11 +13,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from softplc.datatypes import TYPE_NAMES
+from softplc.core.datatypes import TYPE_NAMES
 from softplc.util.durations import DURATION_REGEX
 
 if TYPE_CHECKING:
-    from softplc.tags import TagDef
+    from softplc.core.tags import TagDef
     from softplc.config.plant import PlantConfig
     from softplc.yamlsource import Problem
 

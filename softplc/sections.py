@@ -21,7 +21,7 @@ from softplc.schema import Section, build_schema, check_registry, strict_duratio
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.tags import TagDef
+    from softplc.core.tags import TagDef
     from softplc.yamlsource import Problem
 
 # Modules that own a section (each defines SECTION, or SECTIONS for several), in the order their

@@ -11,10 +11,10 @@ from collections.abc import Callable
 from typing import Any
 
 from softplc.config.plant import SYSTEM_PREFIX, PlantConfig, TaskConfig
-from softplc.datatypes import DataType
+from softplc.core.datatypes import DataType
 from softplc.scan import ScanEngine
-from softplc.tagdb import TagDatabase
-from softplc.tags import Access, TagDef
+from softplc.core.tagdb import TagDatabase
+from softplc.core.tags import Access, TagDef
 
 _SERIES = ("scan", "cycle", "latency")
 _STATS = ("min", "max", "mean", "p99")

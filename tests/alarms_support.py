@@ -10,14 +10,14 @@ from pathlib import Path
 from typing import Any
 
 from softplc.adapters import build_adapters
-from softplc.clock import RealClock, SimClock
-from softplc.commands import CommandRefused
+from softplc.core.clock import RealClock, SimClock
+from softplc.core.commands import CommandRefused
 from softplc.config import load_config
-from softplc.events import Event
-from softplc.roles import Role
+from softplc.core.events import Event
+from softplc.core.roles import Role
 from softplc.runtime import Runtime
-from softplc.tagdb import Origin
-from softplc.tags import Quality
+from softplc.core.tagdb import Origin
+from softplc.core.tags import Quality
 
 EPOCH = 1_767_225_600.0  # SimClock's wall-clock origin
 DRIVER = Origin("test-driver", role=None)

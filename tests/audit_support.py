@@ -20,7 +20,7 @@ from softplc.adapters import build_adapters
 from softplc.audit.entry import AuditEntry
 from softplc.audit.queries import AuditQuery
 from softplc.audit.recorder import AuditRecorder
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.runtime import Runtime
 from tests.conftest import REPO

@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from softplc.clock import Clock, SimClock
+from softplc.core.clock import Clock, SimClock
 from softplc.config import load_config
 from softplc.fleet.adapter import FleetAdapter
 from softplc.fleet.gridmap import OccupancyGrid

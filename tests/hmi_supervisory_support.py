@@ -12,7 +12,7 @@ from typing import Any
 
 from hmi_support import Plant, add_users
 from softplc.adapters import build_adapters
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.hmi.server import HmiServer
 from softplc.hmi.settings import HmiSettings

@@ -20,14 +20,14 @@ from typing import Any
 import aiohttp
 import pytest_asyncio
 
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.hmi.server import HmiServer
 from softplc.hmi.settings import HmiSettings
-from softplc.program import InOut, Input, Output, Program
-from softplc.roles import Role
+from softplc.core.program import InOut, Input, Output, Program
+from softplc.core.roles import Role
 from softplc.runtime import Runtime
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 from softplc.users import UserStore
 
 REPO = Path(__file__).resolve().parent.parent

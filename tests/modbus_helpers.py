@@ -16,11 +16,11 @@ from typing import Any
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.modbus.server import ModbusAdapter
 from softplc.modbus.settings import ModbusSettings
-from softplc.program import Input, Output, Program
+from softplc.core.program import Input, Output, Program
 from softplc.runtime import Runtime
 
 

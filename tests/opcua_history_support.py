@@ -20,11 +20,11 @@ from pathlib import Path
 from typing import Any
 
 from softplc.adapters import build_adapters
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.config import load_config
 from softplc.runtime import Runtime
-from softplc.tagdb import Origin
-from softplc.tags import Quality
+from softplc.core.tagdb import Origin
+from softplc.core.tags import Quality
 from tests.conftest import REPO
 from tests.opcua_support import add_users
 

@@ -13,7 +13,7 @@ from typing import Any
 from asyncua import Client
 
 from softplc import InOut, Input, Output, Program
-from softplc.clock import Clock, RealClock
+from softplc.core.clock import Clock, RealClock
 from softplc.config import load_config
 from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.opcua.client import ClientCertificate, ensure_client_certificate, pem_certificate

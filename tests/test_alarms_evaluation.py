@@ -7,10 +7,10 @@ import itertools
 import pytest
 
 from softplc.alarms.evaluation import compile_condition
-from softplc.datatypes import DataType
-from softplc.expression import Condition
-from softplc.tagdb import TagDatabase
-from softplc.tags import TagDef
+from softplc.core.datatypes import DataType
+from softplc.core.expression import Condition
+from softplc.core.tagdb import TagDatabase
+from softplc.core.tags import TagDef
 
 EXPRESSIONS = [
     "a > 3", "a > 3 and b", "not b or a <= 0", "(a or b) + 1 > 1", "a / c > 1", "c == 0 and a / c > 1", "1 < a < 5",

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from softplc.adapters import build_adapters
 from softplc.alarms.journal import AlarmJournal, JournalQuery, JournalSink, search, write_csv
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.runtime import Runtime
 from softplc.storage import BatchWriter, Database, StorageSettings
@@ -117,7 +117,7 @@ async def test_a_running_plant_journals_to_its_configured_backend(storage_settin
 async def test_alarms_keep_working_while_the_journal_store_is_down_and_say_so(tmp_path: Path, caplog) -> None:
     import socket
 
-    from softplc.commands import CommandRefused
+    from softplc.core.commands import CommandRefused
 
     with socket.socket() as probe:  # a loopback port nobody listens on
         probe.bind(("127.0.0.1", 0))

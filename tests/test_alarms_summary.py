@@ -8,12 +8,12 @@ import time
 from pymodbus.client import AsyncModbusTcpClient
 
 from softplc.adapters import build_adapters
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.modbus.server import ModbusAdapter
 from softplc.modbus.settings import ModbusSettings
 from softplc.runtime import Runtime
-from softplc.tagdb import Rule
+from softplc.core.tagdb import Rule
 from tests.alarms_support import DRIVER, PEOPLE, call, client_write, plant, simulate, write
 
 ALARMS = """

@@ -12,11 +12,11 @@ import textwrap
 from pathlib import Path
 
 from softplc.adapters import build_adapters
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.config import load_config
-from softplc.roles import Role
+from softplc.core.roles import Role
 from softplc.runtime import Runtime
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 from tests.audit_support import PASSWORDS, adapter, running, softplc, wait_until
 
 ALICE = Origin("opcua", "alice", "10.0.0.7:51022", Role.OPERATOR)

@@ -11,13 +11,13 @@ import pytest
 
 from softplc.adapters import build_adapters
 from softplc.audit.queries import AuditQuery, search
-from softplc.clock import RealClock
-from softplc.commands import CommandRefused
+from softplc.core.clock import RealClock
+from softplc.core.commands import CommandRefused
 from softplc.config import load_config
-from softplc.roles import Role
+from softplc.core.roles import Role
 from softplc.runtime import AdapterError, Runtime
 from softplc.storage import Database
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 PEOPLE = {role.value: Origin("hmi", role.value, "10.0.0.5:40000", role) for role in Role}
 DRIVER = Origin("fleet:r01", role=None)

@@ -9,10 +9,10 @@ from typing import Any
 from softplc.audit.entry import MAX_TEXT, CallRecord
 from softplc.audit.queries import AuditQuery, search, write_csv
 from softplc.audit.store import CATALOGUE, AuditSink
-from softplc.commands import CommandCall
-from softplc.roles import Role
+from softplc.core.commands import CommandCall
+from softplc.core.roles import Role
 from softplc.storage import BatchWriter, Database, StorageSettings
-from softplc.tagdb import Origin, Rule, WriteEvent
+from softplc.core.tagdb import Origin, Rule, WriteEvent
 
 DAY = 86400.0
 T0 = 1_767_225_600.0  # 2026-01-01T00:00:00Z

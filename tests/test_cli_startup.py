@@ -86,8 +86,7 @@ def test_choices_copied_for_a_light_parser_match_their_source() -> None:
     from softplc.fleet import agent
     from softplc.fleet import cli as fleet_cli
     from softplc.opcua import cli as opcua_cli
-    from softplc import roles
-
+    from softplc.core import roles
     assert opcua_cli.ROLE_NAMES == roles.ROLE_NAMES
     assert fleet_cli.AGENT_NAMESPACE == agent.DEFAULT_NAMESPACE
 

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from softplc.clock import RealClock, SimClock, wait_for
+from softplc.core.clock import RealClock, SimClock, wait_for
 
 
 async def driven(clock: SimClock) -> asyncio.Task[None]:

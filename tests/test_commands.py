@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from softplc.commands import CommandCall, CommandRefused, Commands, Permission, UnknownCommand
-from softplc.events import Event, EventBus
-from softplc.roles import Role
-from softplc.tagdb import Origin
+from softplc.core.commands import CommandCall, CommandRefused, Commands, Permission, UnknownCommand
+from softplc.core.events import Event, EventBus
+from softplc.core.roles import Role
+from softplc.core.tagdb import Origin
 
 VIEWER = Origin("hmi", user="vera", role=Role.VIEWER)
 OPERATOR = Origin("opcua", user="otto", role=Role.OPERATOR)

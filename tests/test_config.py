@@ -9,9 +9,9 @@ import pytest
 import yaml
 
 from softplc.config import PlantConfig, load_config
-from softplc.datatypes import DataType
+from softplc.core.datatypes import DataType
 from softplc.sections import config_schema
-from softplc.tags import Access
+from softplc.core.tags import Access
 
 from conftest import REPO
 
@@ -159,7 +159,7 @@ def test_for_each_list_bindings_and_params(make_config) -> None:
 
 
 async def test_list_bindings_run(make_config, tmp_path) -> None:
-    from softplc.clock import SimClock
+    from softplc.core.clock import SimClock
     from softplc.runtime import Runtime
 
     runtime = Runtime(_summer_config(make_config), SimClock(), state_dir=tmp_path)

@@ -14,7 +14,7 @@ import pytest
 
 from softplc import schema, sections
 from softplc.cli import main
-from softplc.roles import Role
+from softplc.core.roles import Role
 from softplc.config import load_config
 from softplc.schema import RegistryError, Section
 from softplc.yamlsource import ConfigError
@@ -155,7 +155,7 @@ def test_owners_cannot_claim_the_same_section_or_key_or_a_core_one() -> None:
 
 
 def test_an_owner_adds_tags_to_the_runtime_like_the_system_tags(with_notebook, tmp_path: Path, capsys) -> None:
-    from softplc.clock import SimClock
+    from softplc.core.clock import SimClock
     from softplc.modbus.address_map import Table, build_address_map
     from softplc.modbus.settings import ModbusSettings
     from softplc.runtime import Runtime

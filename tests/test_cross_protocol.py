@@ -13,7 +13,7 @@ from asyncua import Client, ua
 from modbus_helpers import value_of, words_of
 from pymodbus.client import AsyncModbusTcpClient
 
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.modbus.server import ModbusAdapter
 from softplc.modbus.settings import ModbusSettings

@@ -9,10 +9,10 @@ from typing import Any
 
 import pytest
 
-from softplc.clock import SimClock
-from softplc.roles import Role
+from softplc.core.clock import SimClock
+from softplc.core.roles import Role
 from softplc.runtime import Runtime
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 from conftest import REPO
 
@@ -247,7 +247,7 @@ async def test_an_automatic_restart_makes_no_false_edge(plant) -> None:
 
 def test_blocks_created_by_a_warm_start_take_their_first_input_as_memory() -> None:
     from softplc import CTD, CTU, F_TRIG, R_TRIG, TP
-    from softplc.function_blocks import warm_start
+    from softplc.core.function_blocks import warm_start
 
     clock = SimClock()
 
@@ -269,7 +269,7 @@ async def test_a_stall_applies_the_reaction_as_soon_as_the_stuck_scan_returns(ma
     import asyncio
     import time
 
-    from softplc.clock import RealClock
+    from softplc.core.clock import RealClock
 
     text = f"""
 version: 1

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.config import load_config
 from softplc.fleet.adapter import FleetAdapter
 from softplc.fleet.gridmap import OccupancyGrid, load_map

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from softplc.clock import RealClock, SimClock
+from softplc.core.clock import RealClock, SimClock
 from softplc.fleet.driver import PlanRequest, run_plan
 from softplc.fleet.floor import Floor
 from softplc.fleet.gridmap import load_map
@@ -129,7 +129,7 @@ def test_a_script_without_a_main_guard_gets_its_worker(tmp_path: Path) -> None:
         from softplc.fleet.gridmap import load_map
         from softplc.fleet.driver import PlanRequest
         from softplc.fleet.planning import ClockPlanning, ProcessPlanning
-        from softplc.clock import RealClock
+        from softplc.core.clock import RealClock
 
         print("script body ran", flush=True)  # once, by this process only
 

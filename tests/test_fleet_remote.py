@@ -16,14 +16,14 @@ from urllib.parse import urlparse
 
 import pytest
 
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.fleet.adapter import FleetAdapter
 from softplc.fleet.gridmap import load_map
 from softplc.fleet.robots import load_robots
 from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.runtime import Runtime
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 
 from conftest import REPO
 from fleet_support import robot_yaml, write_plant

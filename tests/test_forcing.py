@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
-from softplc.clock import SimClock
-from softplc.commands import CommandRefused
-from softplc.roles import Role
+from softplc.core.clock import SimClock
+from softplc.core.commands import CommandRefused
+from softplc.core.roles import Role
 from softplc.runtime import Runtime
-from softplc.tagdb import Origin, Rule
+from softplc.core.tagdb import Origin, Rule
 
 from conftest import REPO
 

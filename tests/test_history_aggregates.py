@@ -11,7 +11,7 @@ import pytest
 from softplc.history.aggregates import Aggregate, AggregateConfig, Flags, Result, intervals
 from softplc.history.reads import InvalidContinuation, read_processed, read_raw
 from softplc.storage import StorageSettings
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 from tests.test_history_store import T0, Store
 
 GOOD, UNCERTAIN, BAD = Quality.GOOD, Quality.UNCERTAIN, Quality.BAD

@@ -9,9 +9,9 @@ import pytest
 import pytest_asyncio
 from asyncua import ua
 
-from softplc.commands import CommandRefused
-from softplc.roles import Role
-from softplc.tagdb import Origin
+from softplc.core.commands import CommandRefused
+from softplc.core.roles import Role
+from softplc.core.tagdb import Origin
 from tests.opcua_history_support import EPOCH, recorded_plant
 from tests.opcua_support import client_for
 

@@ -12,7 +12,7 @@ from softplc.history.aggregates import Aggregate, Sample
 from softplc.history.queries import Continuation, HistoryReader, UnknownTag
 from softplc.history.store import HistorySink, TagInfo
 from softplc.storage import BatchWriter, Database, StorageSettings
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 
 T0 = 1_767_225_600.0  # 2026-01-01T00:00:00Z, a partition boundary
 GOOD, BAD = Quality.GOOD, Quality.BAD

@@ -7,7 +7,7 @@ import math
 from softplc.history.recorder import TagFilter
 from softplc.history.settings import TagPolicy
 from softplc.history.swinging_door import SwingingDoor
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 
 
 def archive(door: SwingingDoor, points: list[tuple[float, float]]) -> list[tuple[float, float]]:

@@ -19,8 +19,8 @@ import pytest
 import pytest_asyncio
 
 from hmi_support import DRIVER, PASSWORDS, Plant, http_client, http_login, receive_until, start_plant, wait_until
-from softplc.tagdb import Rule, WriteEvent, WriteRejected
-from softplc.tags import Quality
+from softplc.core.tagdb import Rule, WriteEvent, WriteRejected
+from softplc.core.tags import Quality
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 

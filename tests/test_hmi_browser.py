@@ -244,7 +244,7 @@ async def test_other_modules_add_pages_banners_and_routes(browser: Any, tmp_path
     from aiohttp import web
 
     from softplc.hmi.shell import Page
-    from softplc.roles import Role
+    from softplc.core.roles import Role
 
     def script(text: str) -> Any:
         async def handler(request: web.Request) -> web.Response:

@@ -12,7 +12,7 @@ from softplc.adapters import build_adapters
 from softplc.cli import main
 from softplc.config import load_config
 from softplc.hmi.settings import HmiSettings, hmi_problems
-from softplc.roles import Role
+from softplc.core.roles import Role
 from softplc.yamlsource import ConfigError
 
 BAD_VIEW = """

@@ -18,7 +18,7 @@ import aiohttp
 import pytest
 
 from hmi_support import plant_yaml, start_plant, wait_until
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 
 pytestmark = pytest.mark.asyncio
 

@@ -21,8 +21,8 @@ import pytest_asyncio
 
 from hmi_support import (ARTIFACTS, Plant, browser, chromium_available, log_in, open_page, plant_yaml, ready,  # noqa: F401 (browser: a fixture)
                          screenshot_on_failure, start_plant, wait_until)
-from softplc.roles import Role
-from softplc.tagdb import Origin
+from softplc.core.roles import Role
+from softplc.core.tagdb import Origin
 
 pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
 if not chromium_available():

@@ -19,7 +19,7 @@ import pytest
 import pytest_asyncio
 
 from hmi_support import Plant, http_client, http_login, post_command, receive_until, start_plant, wait_until
-from softplc.commands import CommandCall
+from softplc.core.commands import CommandCall
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 

@@ -22,7 +22,7 @@ pytestmark = pytest.mark.slow
 SERVE = textwrap.dedent("""
     import asyncio, sys, urllib.request
     import softplc
-    from softplc.clock import RealClock
+    from softplc.core.clock import RealClock
     from softplc.config import parse_config
     from softplc.hmi.server import HmiServer
     from softplc.hmi.settings import HmiSettings

@@ -22,7 +22,7 @@ import pytest_asyncio
 from hmi_support import (ARTIFACTS, REPO, Plant, browser, chromium_available, log_in, open_page, ready,  # noqa: F401 (browser: a fixture)
                          screenshot_on_failure, wait_until)
 from hmi_supervisory_support import start_supervisory_plant
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 
 pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
 if not chromium_available():

@@ -8,8 +8,8 @@ import logging
 import pytest
 
 from softplc.hmi.writelog import WriteLog
-from softplc.roles import Role
-from softplc.tagdb import Origin, Rule, WriteEvent
+from softplc.core.roles import Role
+from softplc.core.tagdb import Origin, Rule, WriteEvent
 
 pytestmark = pytest.mark.asyncio
 

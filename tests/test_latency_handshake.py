@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.config import PlantConfig, load_config
 from softplc.runtime import Runtime
 from softplc.scan import ProgramState

@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.latency.measurement import Measurement, Target, measure
 from softplc.latency.plant import handshake_config
 from softplc.latency.progress import summary

@@ -18,12 +18,12 @@ from typing import Any
 
 import pytest
 
-from softplc.datatypes import TypeMismatch
+from softplc.core.datatypes import TypeMismatch
 from softplc.opcua import OpcUaServer, Pki
 from softplc.opcua.client import ensure_client_certificate
-from softplc.roles import Role
+from softplc.core.roles import Role
 from softplc.runtime import Runtime
-from softplc.tagdb import Origin, Rule, WriteRejected
+from softplc.core.tagdb import Origin, Rule, WriteRejected
 from tests.conftest import REPO
 from tests.opcua_support import PASSWORDS, running_plant, wait_until
 

@@ -14,7 +14,7 @@ import termios
 import time
 from pathlib import Path
 
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 from tests.conftest import REPO
 from tests.opcua_support import running_plant
 from tests.test_live_cli import force

@@ -112,10 +112,10 @@ def test_text_lines_carry_simulated_time_level_and_the_program_logger(cli, tmp_p
     assert code == 0, err
     lines = {match.group(3): match for match in log_lines(err)}
     ready = lines["ready to divide"]
-    assert (ready.group(1), ready.group(2), ready.group(4)) == ("2026-01-01T00:00:00.000Z", "INFO", "softplc.program.divider")
+    assert (ready.group(1), ready.group(2), ready.group(4)) == ("2026-01-01T00:00:00.000Z", "INFO", "softplc.core.program.divider")
     fault = next(match for text, match in lines.items() if text.startswith("program divider FAULTED"))
     # The fault happens in the scan at simulated 2.5 s, and its line says so; it is the program's own.
-    assert (fault.group(1), fault.group(2), fault.group(4)) == ("2026-01-01T00:00:02.500Z", "ERROR", "softplc.program.divider")
+    assert (fault.group(1), fault.group(2), fault.group(4)) == ("2026-01-01T00:00:02.500Z", "ERROR", "softplc.core.program.divider")
     assert fault.group(3) == f"program divider FAULTED: ZeroDivisionError: division by zero at {tmp_path / 'log_programs.py'}:16"
     assert "Traceback" not in err  # without -v, the one-line error
 
@@ -140,10 +140,10 @@ def test_json_lines_in_a_log_file(cli, tmp_path: Path) -> None:
     entries = [json.loads(line) for line in log.read_text().splitlines()]  # every line one JSON object
     assert all(set(entry) >= {"time", "level", "logger", "message"} for entry in entries)
     fault = next(entry for entry in entries if entry["message"].startswith("program divider FAULTED"))
-    assert fault["time"] == "2026-01-01T00:00:02.500Z" and fault["level"] == "ERROR" and fault["logger"] == "softplc.program.divider"
+    assert fault["time"] == "2026-01-01T00:00:02.500Z" and fault["level"] == "ERROR" and fault["logger"] == "softplc.core.program.divider"
     assert fault["exception"].startswith("Traceback (most recent call last):")
     assert fault["exception"].rstrip().endswith("ZeroDivisionError: division by zero")
-    assert {"message": "ready to divide", "logger": "softplc.program.divider", "level": "INFO"}.items() <= next(
+    assert {"message": "ready to divide", "logger": "softplc.core.program.divider", "level": "INFO"}.items() <= next(
         entry for entry in entries if entry["message"] == "ready to divide").items()
     # The console keeps the warnings and errors only, as JSON too.
     console = [json.loads(line) for line in err.splitlines() if line.startswith("{")]
@@ -160,7 +160,7 @@ def test_the_log_file_rotates_by_size_and_keeps_n_files(cli, tmp_path: Path) -> 
     for name in files:
         assert 0 < (tmp_path / name).stat().st_size <= 4096
     # The newest file holds the newest lines: a chatter's scans count up across the files.
-    scans = [[int(n) for n in re.findall(r"scan (\d+) .*\[softplc.program.chatter1\]", (tmp_path / name).read_text())]
+    scans = [[int(n) for n in re.findall(r"scan (\d+) .*\[softplc.core.program.chatter1\]", (tmp_path / name).read_text())]
              for name in ("plant.log.2", "plant.log.1", "plant.log")]
     flat = [n for part in scans for n in part]
     assert flat == sorted(flat) and all(scans)

@@ -23,7 +23,7 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from hmi_support import PASSWORDS, add_users, start_plant, wait_until
 from softplc.adapters import build_adapters
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.metrics.adapter import MetricsAdapter
 from softplc.metrics.histograms import SeriesHistogram

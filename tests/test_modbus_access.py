@@ -10,7 +10,7 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.constants import ExcCodes
 
 from softplc.modbus.address_map import Table
-from softplc.tagdb import Rule
+from softplc.core.tagdb import Rule
 
 PLANT = """
 version: 1

@@ -7,7 +7,7 @@ import time
 from softplc.config import parse_config
 from softplc.modbus.address_map import Table, build_address_map
 from softplc.modbus.image import RegisterImage
-from softplc.tagdb import TagDatabase
+from softplc.core.tagdb import TagDatabase
 
 COUNT = 1000
 

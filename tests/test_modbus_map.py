@@ -11,7 +11,7 @@ import struct
 import pytest
 
 from softplc.cli import main
-from softplc.datatypes import DataType
+from softplc.core.datatypes import DataType
 from softplc.modbus.address_map import Table, build_address_map
 from softplc.modbus.codec import CodecError, RegisterCodec
 from softplc.yamlsource import ConfigError

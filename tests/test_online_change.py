@@ -11,13 +11,13 @@ from typing import Any
 
 import pytest
 
-from softplc.clock import Clock, SimClock
-from softplc.commands import CommandRefused
+from softplc.core.clock import Clock, SimClock
+from softplc.core.commands import CommandRefused
 from softplc.config import load_config
 from softplc.online_change import ChangeRefused
-from softplc.roles import Role
+from softplc.core.roles import Role
 from softplc.runtime import Runtime
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 from conftest import REPO
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 
 from test_online_change import Plant
 
@@ -59,7 +59,7 @@ async def test_a_10ms_task_misses_no_cycle_while_its_program_is_changed_online(t
 
 async def test_a_new_version_whose_setup_does_not_return_is_reported_and_blocks_the_next_change(tmp_path: Path, monkeypatch) -> None:
     from softplc import online_change
-    from softplc.commands import CommandRefused
+    from softplc.core.commands import CommandRefused
 
     monkeypatch.setattr(online_change, "CHECK_TIMEOUT", 0.3)
     plant = Plant(tmp_path, RealClock())

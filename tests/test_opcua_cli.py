@@ -15,7 +15,7 @@ import pytest
 from asyncua import Client, ua
 
 from softplc.cli import main
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.opcua import OpcUaServer, OpcUaSettings, UserStore
 from softplc.opcua.settings import SettingsError

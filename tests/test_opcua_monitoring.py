@@ -14,7 +14,7 @@ from asyncua import ua
 
 from softplc.opcua import subscriptions
 from softplc.opcua.subscriptions import TagSubscription
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 from tests.opcua_support import client_for, running_plant, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

@@ -9,7 +9,7 @@ from asyncua import ua
 from asyncua.common.subscription import DataChangeNotif
 
 from softplc.opcua.units import unit_id
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 from tests.opcua_support import PASSWORDS, client_for, running_plant, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

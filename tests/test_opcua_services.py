@@ -11,9 +11,9 @@ import pytest
 import pytest_asyncio
 from asyncua import ua
 
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.opcua.history import HistoryPage, Sample
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 from tests.opcua_support import client_for, running_plant, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

@@ -12,13 +12,13 @@ import pytest
 from asyncua import ua
 from pymodbus.client import AsyncModbusTcpClient
 
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.modbus.server import ModbusAdapter
 from softplc.modbus.settings import ModbusSettings
 from softplc.opcua import OpcUaServer, OpcUaSettings
 from softplc.runtime import Runtime
-from softplc.tagdb import WriteEvent
+from softplc.core.tagdb import WriteEvent
 from tests.opcua_support import add_users, client_for, running_plant, wait_until
 
 STRINGS = """

@@ -8,11 +8,11 @@ from typing import Any
 
 import pytest
 
-from softplc.clock import SimClock
-from softplc.commands import CommandRefused
-from softplc.roles import Role
+from softplc.core.clock import SimClock
+from softplc.core.commands import CommandRefused
+from softplc.core.roles import Role
 from softplc.runtime import Runtime
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 from conftest import REPO
 

@@ -10,9 +10,9 @@ from programs.cooperative_dispatcher import CooperativeDispatcher
 from programs.motion_sequencer import MotionSequencer
 from programs.optimal_dispatcher import OptimalAssignment
 from programs.task_weighting import TaskWeighting, lowest_weight, task_weight
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.fleet.arrival import GOAL_TOLERANCE
-from softplc.program import Program, ProgramContext
+from softplc.core.program import Program, ProgramContext
 
 
 def make(cls: type[Program], **params: object) -> Program:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from programs.plant_simulator import MaterialHandlingPlant
-from softplc.clock import SimClock
-from softplc.program import ProgramContext
+from softplc.core.clock import SimClock
+from softplc.core.program import ProgramContext
 from softplc.runtime import Runtime
 
 PLANT = """

@@ -15,7 +15,7 @@ import pytest
 
 from conftest import REPO
 from softplc.cli import main
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.runtime import Runtime
 from softplc.svm.dataset import (
     DatasetError,
@@ -257,7 +257,7 @@ def test_interactive_labelling_in_a_terminal(tmp_path):
 
 def test_svm_dispatcher_with_skip_full_never_picks_a_full_storage(tmp_path):
     from programs.svm_dispatcher import SvmDispatcher
-    from softplc.program import ProgramContext
+    from softplc.core.program import ProgramContext
 
     always_task_1 = TaskModel(features=feature_names(2), classes=[0, 1], coef=[[0.0] * 6], intercept=[-1.0])
     always_task_1.save(tmp_path / "m.json")

@@ -11,14 +11,14 @@ from typing import Any
 
 import pytest
 
-from softplc.clock import SimClock
-from softplc.commands import CommandRefused
+from softplc.core.clock import SimClock
+from softplc.core.commands import CommandRefused
 from softplc.config import load_config
-from softplc.expression import Condition
-from softplc.roles import Role
+from softplc.core.expression import Condition
+from softplc.core.roles import Role
 from softplc.runtime import Runtime
-from softplc.tagdb import Origin
-from softplc.tags import Quality
+from softplc.core.tagdb import Origin
+from softplc.core.tags import Quality
 
 from conftest import REPO
 
@@ -464,7 +464,7 @@ async def test_retained_values_are_saved_in_the_background_on_the_real_clock(mak
     import threading
     import time
 
-    from softplc.clock import RealClock
+    from softplc.core.clock import RealClock
 
     state = tmp_path / "real-state"
     runtime = Runtime(make_config(RETAIN), RealClock(), state_dir=state)

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from softplc.cli import main
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.retain import RetainError, RetainStore
 from softplc.runtime import Runtime
 

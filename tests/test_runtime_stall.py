@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from softplc.clock import RealClock
+from softplc.core.clock import RealClock
 from softplc.runtime import Runtime, RuntimeState
 
 from conftest import REPO

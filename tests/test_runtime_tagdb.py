@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from softplc.datatypes import DataType, TypeMismatch
-from softplc.roles import Role
-from softplc.tagdb import Origin, Rule, TagDatabase, WriteRejected
-from softplc.tags import Access, Quality, TagDef
+from softplc.core.datatypes import DataType, TypeMismatch
+from softplc.core.roles import Role
+from softplc.core.tagdb import Origin, Rule, TagDatabase, WriteRejected
+from softplc.core.tags import Access, Quality, TagDef
 
 
 @pytest.mark.parametrize(

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.runtime import Runtime
 
 from conftest import REPO

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from softplc.clock import RealClock
-from softplc.expression import Condition
+from softplc.core.clock import RealClock
+from softplc.core.expression import Condition
 from softplc.runtime import Runtime, RuntimeState
 
 from conftest import REPO

@@ -1,8 +1,8 @@
 """The default plant (tagdb.yaml) runs on the simulated clock and its robots deliver material."""
 
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.config import load_config
-from softplc.expression import Condition
+from softplc.core.expression import Condition
 from softplc.runtime import Runtime
 from softplc.scan import ProgramState
 

@@ -14,7 +14,7 @@ from softplc.alarms.model import (
     Trigger, next_state,
 )
 from softplc.util.durations import format_duration
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 
 class AlarmActions:

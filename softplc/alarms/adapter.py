@@ -20,7 +20,7 @@ from softplc.alarms.journal import AlarmJournal, JournalSink
 from softplc.alarms.settings import AlarmSettings
 from softplc.alarms.summary import SummaryTags
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
     from softplc.runtime import Runtime

@@ -28,11 +28,11 @@ from softplc.alarms.actions import AlarmActions
 from softplc.alarms.engine import AlarmEngine
 from softplc.alarms.journal import AlarmJournal, JournalQuery
 from softplc.alarms.model import AlarmState, Priority
-from softplc.clock import Clock
-from softplc.commands import CommandRefused, Commands, Permission
+from softplc.core.clock import Clock
+from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.util.durations import parse_duration
 from softplc.storage.command_search import search_for_command
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 STATE_FILTERS = ("all", "annunciated", "active", "unacknowledged", "shelved", "suppressed", "out_of_service", "normal")
 

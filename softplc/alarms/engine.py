@@ -25,11 +25,11 @@ from softplc.alarms.model import (
     AlarmSnapshot, AlarmState, Priority, Shelving, ShelveKind, Transition, Trigger, UnknownAlarm, effective_state, next_state, released_state,
 )
 from softplc.alarms.settings import AlarmDefinition, AlarmSettings
-from softplc.clock import Clock
-from softplc.events import Event
+from softplc.core.clock import Clock
+from softplc.core.events import Event
 from softplc.util.suggest import did_you_mean
-from softplc.tagdb import Origin, TagDatabase
-from softplc.tags import Tag
+from softplc.core.tagdb import Origin, TagDatabase
+from softplc.core.tags import Tag
 
 log = logging.getLogger(__name__)
 

@@ -14,9 +14,9 @@ from collections.abc import Callable
 from typing import Any
 
 from softplc.alarms.settings import AlarmDefinition
-from softplc.expression import Condition
-from softplc.tagdb import TagDatabase
-from softplc.tags import Quality
+from softplc.core.expression import Condition
+from softplc.core.tagdb import TagDatabase
+from softplc.core.tags import Quality
 
 ON = "on"
 

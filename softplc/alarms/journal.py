@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, fields
 from typing import IO, Any
 
-from softplc.events import Event
+from softplc.core.events import Event
 from softplc.storage import BatchWriter, Database, escape_like, like_pattern, plant_and_time
 from softplc.util.timestamps import format_utc
 

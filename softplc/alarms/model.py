@@ -24,7 +24,7 @@ import enum
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from softplc.commands import CommandRefused
+from softplc.core.commands import CommandRefused
 
 
 class Priority(enum.Enum):

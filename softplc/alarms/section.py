@@ -15,7 +15,7 @@ from softplc.schema import DURATION, Section
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.tags import TagDef
+    from softplc.core.tags import TagDef
 
 
 def summary_tags(config: PlantConfig) -> list[TagDef]:

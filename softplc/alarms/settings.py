@@ -25,14 +25,14 @@ from softplc.alarms.messages import FIELDS, MessageError, placeholders
 from softplc.alarms.model import Priority
 from softplc.alarms.schema import KINDS, LEVELS
 from softplc.config.plant import PlantConfig
-from softplc.datatypes import TypeMismatch
+from softplc.core.datatypes import TypeMismatch
 from softplc.util.durations import parse_duration
-from softplc.expression import Condition, ExpressionError
+from softplc.core.expression import Condition, ExpressionError
 from softplc.schema import NAME_PATTERN, NAME_RULE
 from softplc.storage.settings import parse_span, storage_problems
 from softplc.util.suggest import did_you_mean
 from softplc.systags import system_tag_definitions
-from softplc.tags import TagDef
+from softplc.core.tags import TagDef
 from softplc.yamlsource import ConfigError, Location, Problem
 
 SECTION = "alarms"

@@ -17,9 +17,9 @@ import logging
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from softplc.datatypes import DataType
-from softplc.tagdb import Origin, TagDatabase, WriteEvent
-from softplc.tags import Access, TagDef
+from softplc.core.datatypes import DataType
+from softplc.core.tagdb import Origin, TagDatabase, WriteEvent
+from softplc.core.tags import Access, TagDef
 
 log = logging.getLogger(__name__)
 

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from softplc.audit.commands import parse_time as parse_absolute
-from softplc.commands import CommandRefused
+from softplc.core.commands import CommandRefused
 from softplc.opcua.login import LoginError, add_login_arguments, login_from_args
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4

@@ -16,10 +16,10 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from softplc.audit.queries import KINDS, MAX_ROWS, AuditQuery
-from softplc.clock import Clock
-from softplc.commands import CommandRefused, Commands, Permission
+from softplc.core.clock import Clock
+from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.storage.command_search import Searchable, search_for_command
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 from softplc.util.timestamps import parse_utc
 
 ARGUMENTS = {

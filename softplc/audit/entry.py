@@ -13,8 +13,8 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from softplc.commands import CommandCall
-from softplc.tagdb import WriteEvent
+from softplc.core.commands import CommandCall
+from softplc.core.tagdb import WriteEvent
 from softplc.util.timestamps import format_utc
 
 MAX_TEXT = 4096  # longest value, argument list or detail kept (a client may send megabytes)

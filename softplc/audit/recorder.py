@@ -1,6 +1,6 @@
 """The audit adapter: listens to every client write and every command call, and keeps them durably.
 
-Two hooks of the core carry everything with its origin (`softplc/origin.py`), whichever adapter
+Two hooks of the core carry everything with its origin (`softplc/core/origin.py`), whichever adapter
 it came through: `db.on_write` (each client write, accepted or refused, with the old and new
 value and the rule broken) and `commands.on_call` (each call of a command that acts: forcing,
 program control, alarm actions, resetting faults...). The listeners only queue the core's own
@@ -23,12 +23,12 @@ from softplc.audit.entry import AuditEntry, CallRecord
 from softplc.audit.queries import AuditQuery, search
 from softplc.audit.settings import AuditSettings
 from softplc.audit.store import SINK_NAME, AuditSink
-from softplc.clock import Clock
-from softplc.commands import CommandCall, Commands
+from softplc.core.clock import Clock
+from softplc.core.commands import CommandCall, Commands
 from softplc.util.realtime import shorten_switch_interval
 from softplc.scan_gate import ScanGate
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
-from softplc.tagdb import TagDatabase, WriteEvent
+from softplc.core.tagdb import TagDatabase, WriteEvent
 
 if TYPE_CHECKING:
     from softplc.runtime import Runtime

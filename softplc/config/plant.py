@@ -7,10 +7,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from softplc.program import Program
-from softplc.fault_reaction import FaultReaction
+from softplc.core.program import Program
+from softplc.core.fault_reaction import FaultReaction
 from softplc.program_instance import NEVER, RestartPolicy
-from softplc.tags import TagDef
+from softplc.core.tags import TagDef
 from softplc.yamlsource import Location, Problem, SourceMap
 
 SYSTEM_PREFIX = "_sys."

@@ -16,7 +16,7 @@ from typing import Any
 from softplc.config.findings import Findings
 from softplc.config.plant import SYSTEM_PREFIX
 from softplc.config.tags import TagChecker
-from softplc.program import Program
+from softplc.core.program import Program
 from softplc.util.suggest import did_you_mean
 
 

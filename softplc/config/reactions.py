@@ -15,9 +15,9 @@ from typing import Any
 from softplc.config.findings import Findings
 from softplc.config.programs import Write, substitute
 from softplc.config.tags import TagChecker
-from softplc.datatypes import TypeMismatch
+from softplc.core.datatypes import TypeMismatch
 from softplc.util.durations import check_duration
-from softplc.fault_reaction import HOLD, INITIAL, FaultReaction
+from softplc.core.fault_reaction import HOLD, INITIAL, FaultReaction
 from softplc.program_instance import NEVER, RestartPolicy
 from softplc.util.suggest import did_you_mean
 from softplc.yamlsource import Problem, SourceMap

@@ -27,8 +27,8 @@ from softplc.fleet.planning import ClockPlanning, Planning, ProcessPlanning
 from softplc.fleet.remote import PUBLISHED_TAGS, AgentRefusal, RemoteLink
 from softplc.fleet.robots import DriverKind, Pose, RobotFile, RobotSpec, load_robots
 from softplc.fleet.settings import FleetSettings
-from softplc.tagdb import Origin, TagDatabase
-from softplc.tags import Quality, Tag
+from softplc.core.tagdb import Origin, TagDatabase
+from softplc.core.tags import Quality, Tag
 
 if TYPE_CHECKING:
     from softplc.runtime import Runtime

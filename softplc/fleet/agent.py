@@ -29,7 +29,7 @@ from typing import Any
 from asyncua import Client, ua
 
 from softplc import __version__
-from softplc.clock import Clock, RealClock
+from softplc.core.clock import Clock, RealClock
 from softplc.fleet.controller import SpeedLimits
 from softplc.fleet.driver import Command, DriverSettings, Report, RobotDriver
 from softplc.fleet.floor import Floor

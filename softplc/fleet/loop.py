@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from softplc.clock import Clock
+from softplc.core.clock import Clock
 from softplc.fleet.driver import Command, PlanRequest, Report, RobotDriver
 from softplc.fleet.peers import PeerView
 from softplc.fleet.planner import Plan

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from softplc.clock import Clock
+from softplc.core.clock import Clock
 from softplc.fleet.driver import PlanRequest, run_plan
 from softplc.fleet.planner import PathPlanner, Plan
 

@@ -16,8 +16,8 @@ from typing import Any
 
 from softplc.fleet.protocol import Answer, Registration, decode_report
 from softplc.fleet.robots import RobotSpec
-from softplc.tagdb import Origin, TagDatabase
-from softplc.tags import Quality
+from softplc.core.tagdb import Origin, TagDatabase
+from softplc.core.tags import Quality
 
 log = logging.getLogger(__name__)
 

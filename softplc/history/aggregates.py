@@ -16,7 +16,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 
 
 class Sample(NamedTuple):

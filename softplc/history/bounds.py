@@ -17,7 +17,7 @@ import bisect
 from collections.abc import Sequence
 
 from softplc.history.aggregates import DEFAULT_CONFIG, AggregateConfig, Flags, Result, Sample
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 
 
 class Series:

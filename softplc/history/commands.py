@@ -19,7 +19,7 @@ import math
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
-from softplc.commands import CommandRefused, Permission
+from softplc.core.commands import CommandRefused, Permission
 from softplc.history.aggregates import Aggregate, AggregateConfig
 from softplc.history.queries import DEFAULT_PLOT_POINTS, HistoryReader, UnknownTag
 from softplc.history.reads import MAX_VALUES, InvalidContinuation, as_dict, read_at_time, read_processed, read_raw

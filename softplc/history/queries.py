@@ -20,7 +20,7 @@ from softplc.history.aggregates import DEFAULT_CONFIG, Aggregate, AggregateConfi
 from softplc.history.bounds import Series, interpolated_bound, simple_bound
 from softplc.history.store import LEVELS, QUALITIES, TagInfo
 from softplc.storage import Database, StorageError
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 
 DEFAULT_PLOT_POINTS = 2000
 

@@ -23,7 +23,7 @@ from typing import Any
 
 from softplc.history.aggregates import AggregateConfig, Aggregate, Flags, Result, Sample, interval_count
 from softplc.history.queries import Continuation, HistoryReader
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 
 # Values per tag per call (OPC UA MaxReturnDataValues): more come with a continuation. Kept small
 # because the caller's side (building the reply, asyncua encoding it) runs on the scan's event

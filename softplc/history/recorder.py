@@ -23,7 +23,7 @@ from softplc.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.history.swinging_door import SwingingDoor
 from softplc.util.realtime import shorten_switch_interval
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
-from softplc.tags import Quality, Tag
+from softplc.core.tags import Quality, Tag
 
 if TYPE_CHECKING:
     from softplc.runtime import Runtime

@@ -21,7 +21,7 @@ from softplc.yamlsource import Problem
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.tags import TagDef
+    from softplc.core.tags import TagDef
 
 DEFAULT_FILE = "history.sqlite"
 SIM_FILE = "history-sim.sqlite"  # --sim runs: simulated timestamps, never mixed with the plant's own

@@ -27,7 +27,7 @@ from typing import Any
 
 from softplc.storage import Database
 from softplc.storage.partitions import PartitionCatalogue, insert_rows
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 
 log = logging.getLogger(__name__)
 

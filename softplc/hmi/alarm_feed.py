@@ -28,13 +28,13 @@ import time
 from collections import deque
 from typing import TYPE_CHECKING, Any
 
-from softplc.events import Event, EventBus
+from softplc.core.events import Event, EventBus
 from softplc.hmi.pacing import Pacer
 from softplc.hmi.wire import dumps
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
-    from softplc.commands import Commands
+    from softplc.core.commands import Commands
     from softplc.hmi.fanout import Client
 
 log = logging.getLogger(__name__)

@@ -31,8 +31,8 @@ from softplc.hmi.fanout import wire_value
 from softplc.hmi.sessions import Identity
 from softplc.util.peers import peer_host
 from softplc.util.suggest import did_you_mean
-from softplc.tagdb import Origin, Rule
-from softplc.tags import Tag
+from softplc.core.tagdb import Origin, Rule
+from softplc.core.tags import Tag
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

@@ -1,4 +1,4 @@
-"""The HMI's door to the runtime's commands (`softplc/commands.py`): what pages and scripts do besides writing tags.
+"""The HMI's door to the runtime's commands (`softplc/core/commands.py`): what pages and scripts do besides writing tags.
 
     GET  /api/commands           the commands, each with its arguments and whether the session's role may call it
     POST /api/commands/NAME      JSON object of arguments → {"ok": true, "command", "result", "time"}
@@ -23,11 +23,11 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
-from softplc.commands import CommandRefused, Permission, UnknownCommand
+from softplc.core.commands import CommandRefused, Permission, UnknownCommand
 from softplc.hmi.wire import json_response
 from softplc.util.peers import PeerLog, peer_host
 from softplc.util.suggest import did_you_mean
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
     from softplc.hmi.api import HmiServer

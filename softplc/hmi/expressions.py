@@ -1,4 +1,4 @@
-"""Expressions of user views, evaluated on the server: one implementation (`softplc.expression`).
+"""Expressions of user views, evaluated on the server: one implementation (`softplc.core.expression`).
 
 Each distinct expression is a live item named "=<expression>" (tag names never start with "=").
 When a tag changes, only the expressions that read it are evaluated again; an expression's
@@ -12,9 +12,9 @@ import logging
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
-from softplc.expression import Condition
-from softplc.tagdb import TagDatabase
-from softplc.tags import Quality, Tag
+from softplc.core.expression import Condition
+from softplc.core.tagdb import TagDatabase
+from softplc.core.tags import Quality, Tag
 
 log = logging.getLogger(__name__)
 

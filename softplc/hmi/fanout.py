@@ -11,7 +11,7 @@ Wire format: `{"type": "update", "time": T, "values": {name: value}, "times": {n
 "quality": {name: code}, "forced": [name, ...]}` — `time` is the timestamp (epoch seconds;
 simulated under --sim) of the items not listed in `times` (a scan commits its outputs with one
 timestamp, so `times` is mostly absent), `quality` lists only the items that are not good (1
-uncertain, 2 bad), and `forced` the items that are forced (softplc/forcing.py: quality good, but
+uncertain, 2 bad), and `forced` the items that are forced (softplc/core/forcing.py: quality good, but
 pinned by an engineer); an item of the message not listed there is not forced.
 Encoding a timestamp and a quality per item would double the cost of an update. Non-finite
 floats travel as the strings "NaN", "Infinity", "-Infinity" (JSON has no such numbers).
@@ -31,7 +31,7 @@ from aiohttp import WSMsgType, web
 
 from softplc.hmi.pacing import Pacer
 from softplc.hmi.sessions import Identity
-from softplc.tags import Quality
+from softplc.core.tags import Quality
 
 log = logging.getLogger(__name__)
 

@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
-from softplc.commands import CommandRefused
+from softplc.core.commands import CommandRefused
 from softplc.util.peers import peer_host
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
     from softplc.hmi.api import HmiServer

@@ -33,14 +33,14 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSMsgType, web
 
-from softplc.clock import Clock
+from softplc.core.clock import Clock
 from softplc.hmi.expressions import ExpressionTable
 from softplc.hmi.fanout import Client, Encoder, Group
 from softplc.hmi.pacing import Pacer
 from softplc.hmi.sessions import Identity
 from softplc.util.peers import PeerLog, peer_host
-from softplc.tagdb import TagDatabase
-from softplc.tags import Tag
+from softplc.core.tagdb import TagDatabase
+from softplc.core.tags import Tag
 
 if TYPE_CHECKING:
     from softplc.hmi.alarm_feed import AlarmFeed

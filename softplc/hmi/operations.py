@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 from softplc.hmi.audit_export import audit_routes
 from softplc.hmi.shell import Page
-from softplc.roles import Role
+from softplc.core.roles import Role
 
 if TYPE_CHECKING:
     from softplc.hmi.api import HmiServer

@@ -16,7 +16,7 @@ import asyncio
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
-from softplc.clock import Clock
+from softplc.core.clock import Clock
 
 
 class Pacer:

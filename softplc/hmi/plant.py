@@ -16,7 +16,7 @@ from softplc.yamlsource import ConfigError
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.tagdb import TagDatabase
+    from softplc.core.tagdb import TagDatabase
 
 log = logging.getLogger(__name__)
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from aiohttp import web
 
 from softplc.logins import PasswordLogins
-from softplc.roles import Role
+from softplc.core.roles import Role
 from softplc.users import UserStore
 
 CSRF_HEADER = "X-CSRF-Token"

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from softplc.util.durations import parse_duration
 from softplc.metrics.settings import METRICS_SCHEMA, metrics_problems
-from softplc.roles import Role
+from softplc.core.roles import Role
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

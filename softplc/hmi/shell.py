@@ -22,7 +22,7 @@ from typing import Any
 
 from aiohttp import web
 
-from softplc.roles import Role
+from softplc.core.roles import Role
 
 _RANK = {Role.VIEWER: 0, Role.OPERATOR: 1, Role.ENGINEER: 2}
 

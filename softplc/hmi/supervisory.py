@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from softplc.commands import Commands
+from softplc.core.commands import Commands
 from softplc.hmi.shell import Page, Shell
 
 log = logging.getLogger(__name__)

@@ -13,7 +13,7 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from softplc.tagdb import Origin, WriteEvent
+from softplc.core.tagdb import Origin, WriteEvent
 
 log = logging.getLogger("softplc.hmi")
 

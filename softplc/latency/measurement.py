@@ -64,7 +64,7 @@ async def _measure(target: Target, result: Measurement, progress: Progress, stop
         await run_client(target, result, progress, stop)
         return
     from softplc.adapters import build_adapters
-    from softplc.clock import RealClock
+    from softplc.core.clock import RealClock
     from softplc.runtime import Runtime
 
     with tempfile.TemporaryDirectory(prefix="softplc-latency-") as state_dir:

@@ -171,7 +171,7 @@ def cmd_write(args: argparse.Namespace) -> int:
 
     async def body(live: LiveSession) -> int:
         from softplc.live.writing import write_tags
-        from softplc.tagdb import Rule
+        from softplc.core.tagdb import Rule
 
         outcomes, sent = await write_tags(live, assignments)
         for outcome in outcomes:

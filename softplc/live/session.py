@@ -2,7 +2,7 @@
 
 Tags are the Variables of softplc's namespace (`urn:softplc:tags`), NodeId `ns=<index>;s=<tag
 name>`. A tag's type comes from its DataType attribute, its range from its EURange property,
-and a forced tag is served with the StatusCode GoodLocalOverride (softplc/forcing.py).
+and a forced tag is served with the StatusCode GoodLocalOverride (softplc/core/forcing.py).
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ from typing import TYPE_CHECKING, Any
 
 from asyncua import Client, ua
 
-from softplc.datatypes import DataType
+from softplc.core.datatypes import DataType
 from softplc.opcua.variants import DATA_TYPE_IDS
 from softplc.util.suggest import did_you_mean
-from softplc.tags import Access, Quality, TagDef
+from softplc.core.tags import Access, Quality, TagDef
 
 if TYPE_CHECKING:
     from softplc.opcua.login import Login

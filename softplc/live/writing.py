@@ -1,7 +1,7 @@
 """`softplc write TAG=VALUE...`: values typed as text, parsed by each tag's type, written in one request.
 
 The server is the judge: each item's OPC UA status is turned back into the runtime's rule
-(`softplc.tagdb.Rule`) and the message the runtime gives for it — the same text as every other
+(`softplc.core.tagdb.Rule`) and the message the runtime gives for it — the same text as every other
 client sees (`t01_iFr: out of range: 700.0 is above the maximum 600`). The detail is made by the
 runtime's own validation (`TagDatabase.validate`) applied to what the server tells of the tag
 (type, EURange, whether this session may write it), so it is word for word the runtime's.
@@ -14,12 +14,12 @@ from typing import Any
 
 from asyncua import ua
 
-from softplc.datatypes import TypeMismatch
+from softplc.core.datatypes import TypeMismatch
 from softplc.live.session import LiveSession, TagInfo
 from softplc.live.table import format_value
 from softplc.opcua.variants import variant_for
-from softplc.roles import Role
-from softplc.tagdb import Rule, TagDatabase, WriteRejected
+from softplc.core.roles import Role
+from softplc.core.tagdb import Rule, TagDatabase, WriteRejected
 
 _CODE_RULES = {
     ua.StatusCodes.BadNodeIdUnknown: Rule.UNKNOWN_TAG,

@@ -10,8 +10,8 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Sequence
 
-from softplc.commands import CommandCall, Commands
-from softplc.tagdb import WriteEvent
+from softplc.core.commands import CommandCall, Commands
+from softplc.core.tagdb import WriteEvent
 
 ACCEPTED = "accepted"
 

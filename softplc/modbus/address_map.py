@@ -27,11 +27,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from softplc.config.plant import SYSTEM_PREFIX, PlantConfig
-from softplc.datatypes import DataType
+from softplc.core.datatypes import DataType
 from softplc.modbus.codec import REGISTER_TYPES, RegisterCodec, register_words
 from softplc.modbus.settings import ModbusSettings
 from softplc.systags import runtime_tag_definitions
-from softplc.tags import Access, TagDef
+from softplc.core.tags import Access, TagDef
 from softplc.yamlsource import ConfigError, Location, Problem, SourceMap
 
 ADDRESS_SPACE = 65536

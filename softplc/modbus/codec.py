@@ -12,7 +12,7 @@ import struct
 from dataclasses import dataclass
 from typing import Any
 
-from softplc.datatypes import DataType
+from softplc.core.datatypes import DataType
 
 REGISTER_TYPES: tuple[DataType, ...] = (
     DataType.INT16,

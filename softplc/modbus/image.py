@@ -13,8 +13,8 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from softplc.modbus.address_map import AddressMap, Mapping, Table
-from softplc.tagdb import TagDatabase
-from softplc.tags import Tag
+from softplc.core.tagdb import TagDatabase
+from softplc.core.tags import Tag
 
 Writer = Callable[[Any], None]
 

@@ -38,7 +38,7 @@ from softplc.modbus.image import RegisterImage
 from softplc.modbus.requests import LIMITS, RequestGuard, guarded_requests
 from softplc.modbus.settings import ModbusSettings, settings_problems
 from softplc.runtime import AdapterError, Runtime
-from softplc.tagdb import Origin, Rule, TagDatabase
+from softplc.core.tagdb import Origin, Rule, TagDatabase
 from softplc.yamlsource import ConfigError
 
 log = logging.getLogger(__name__)

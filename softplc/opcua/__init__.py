@@ -7,7 +7,7 @@ from softplc.util.lazy import lazy_exports
 if TYPE_CHECKING:
     from softplc.opcua.address_space import tag_node_id
     from softplc.opcua.client import ClientCertificate, ensure_client_certificate, make_client
-    from softplc.roles import Role
+    from softplc.core.roles import Role
     from softplc.opcua.security import Pki
     from softplc.opcua.server import OpcUaServer
     from softplc.opcua.settings import DEFAULT_NAMESPACE, OpcUaSettings
@@ -19,7 +19,7 @@ if TYPE_CHECKING:
 _MODULES = {
     "softplc.opcua.address_space": ("tag_node_id",),
     "softplc.opcua.client": ("ClientCertificate", "ensure_client_certificate", "make_client"),
-    "softplc.roles": ("Role",),
+    "softplc.core.roles": ("Role",),
     "softplc.opcua.security": ("Pki",),
     "softplc.opcua.server": ("OpcUaServer",),
     "softplc.opcua.settings": ("DEFAULT_NAMESPACE", "OpcUaSettings"),

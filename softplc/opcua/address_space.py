@@ -28,7 +28,7 @@ from datetime import datetime, timezone
 from asyncua import ua
 from asyncua.server.address_space import AddressSpace, AttributeValue, NodeData
 
-from softplc.tags import Access, Tag, TagDef
+from softplc.core.tags import Access, Tag, TagDef
 from softplc.opcua.units import eu_information
 from softplc.opcua.variants import DATA_TYPE_IDS, data_value
 

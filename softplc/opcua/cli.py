@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from softplc.roles import ROLE_NAMES
+from softplc.core.roles import ROLE_NAMES
 from softplc.yamlsource import load_yaml
 
 if TYPE_CHECKING:  # the rest of softplc.opcua needs asyncua: each command imports what it uses
@@ -166,7 +166,7 @@ def cmd_untrust(args: argparse.Namespace) -> int:
 
 
 def cmd_users_add(args: argparse.Namespace) -> int:
-    from softplc.roles import Role
+    from softplc.core.roles import Role
     from softplc.opcua.security import der_bytes, fingerprint, load_certificate_file
 
     store = _store(args)

@@ -8,7 +8,7 @@
         [{"name", "permission", "description", "arguments": {name: description}}, ...]
 
 The role is the session's (`softplc.opcua.roles`) and is checked by the command registry
-(`softplc.commands`), exactly as for the HMI and the CLI; the Origin carries the session's user
+(`softplc.core.commands`), exactly as for the HMI and the CLI; the Origin carries the session's user
 and peer address. The command line's clients reach the runtime through here (softplc/opcua/door_client.py).
 
 asyncua hands a method only the object's NodeId and the arguments, not the calling session:
@@ -25,10 +25,10 @@ from typing import TYPE_CHECKING, Any
 from asyncua import Server, ua
 from asyncua.server.address_space import AttributeValue
 
-from softplc.commands import CommandRefused, Commands
+from softplc.core.commands import CommandRefused, Commands
 from softplc.opcua.door_client import COMMANDS_OBJECT
 from softplc.opcua.roles import role_of
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
     from asyncua.server.internal_server import InternalServer

@@ -17,7 +17,7 @@ from asyncua import ua
 from asyncua.server.address_space import AttributeValue, NodeData
 
 from softplc.alarms.model import AlarmSnapshot, AlarmState, ShelveKind
-from softplc.events import Event
+from softplc.core.events import Event
 
 _I = ua.ObjectIds
 _SHELVING = {None: ("Unshelved", _I.ShelvedStateMachineType_Unshelved), ShelveKind.TIMED: ("TimedShelved", _I.ShelvedStateMachineType_TimedShelved),

@@ -29,10 +29,10 @@ from asyncua import Server, ua
 from asyncua.common import event_objects
 
 from softplc.alarms.model import AlarmSnapshot, NothingToAcknowledge, NotShelved, ServiceUnchanged, ShelvingTimeOutOfRange, UnknownAlarm
-from softplc.events import Event
+from softplc.core.events import Event
 from softplc.opcua.commands import call_command, current_origin, current_session_id, install_caller_context
 from softplc.opcua.condition_events import EventTypeId, attribute_value, fill, fix_types, link, make_node, new_event, parent_folder
-from softplc.tagdb import Origin
+from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
     from softplc.runtime import Runtime

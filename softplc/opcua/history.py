@@ -61,8 +61,8 @@ from asyncua.common.utils import ServiceError
 from asyncua.server.history import HistoryManager
 
 from softplc.opcua.variants import STATUS_CODES, VARIANT_TYPES
-from softplc.tagdb import TagDatabase
-from softplc.tags import Quality
+from softplc.core.tagdb import TagDatabase
+from softplc.core.tags import Quality
 
 log = logging.getLogger(__name__)
 

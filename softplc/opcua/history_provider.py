@@ -17,10 +17,10 @@ from typing import Any
 
 from asyncua import ua
 
-from softplc.commands import CommandRefused, Commands
+from softplc.core.commands import CommandRefused, Commands
 from softplc.opcua.history import HistoryPage, HistoryUnavailable, Sample
-from softplc.tagdb import Origin
-from softplc.tags import Quality
+from softplc.core.tagdb import Origin
+from softplc.core.tags import Quality
 
 ORIGIN = Origin("opcua", "history", role=None)
 

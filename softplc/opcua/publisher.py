@@ -22,8 +22,8 @@ from asyncua.server.address_space import AddressSpace
 
 from softplc.opcua.scheduling import ScanGuard
 from softplc.opcua.variants import VARIANT_TYPES, tag_data_value
-from softplc.tagdb import TagDatabase
-from softplc.tags import Tag
+from softplc.core.tagdb import TagDatabase
+from softplc.core.tags import Tag
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
-"""The OPC UA session user that carries a role (`softplc.roles`), and asyncua's service-level rules.
+"""The OPC UA session user that carries a role (`softplc.core.roles`), and asyncua's service-level rules.
 
-What each role may do is the core's (`softplc.roles`, enforced by `TagDatabase.validate`): the
+What each role may do is the core's (`softplc.core.roles`, enforced by `TagDatabase.validate`): the
 same for OPC UA, Modbus, the HMI and the CLI. Nobody may add or delete nodes or references.
 """
 
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from asyncua import ua
 from asyncua.crypto.permission_rules import ADMIN_TYPES, USER_TYPES, PermissionRuleset, User, UserRole
 
-from softplc.roles import ROLE_NAMES, Role
+from softplc.core.roles import ROLE_NAMES, Role
 
 __all__ = ["ROLE_NAMES", "Role", "RolePermissions", "SessionUser", "role_of"]
 

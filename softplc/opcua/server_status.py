@@ -26,7 +26,7 @@ from datetime import datetime, timezone
 from asyncua import ua
 from asyncua.server.address_space import AddressSpace, AttributeValue
 
-from softplc.clock import Clock
+from softplc.core.clock import Clock
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlparse
 
-from softplc.roles import Role
+from softplc.core.roles import Role
 
 if TYPE_CHECKING:
     from asyncua import ua

@@ -10,7 +10,7 @@ from asyncua.server.user_managers import UserManager
 
 from softplc.logins import PasswordLogins
 from softplc.opcua.roles import SessionUser
-from softplc.roles import Role
+from softplc.core.roles import Role
 from softplc.users import UserStore
 
 log = logging.getLogger(__name__)

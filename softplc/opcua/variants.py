@@ -22,8 +22,8 @@ from typing import Any
 
 from asyncua import ua
 
-from softplc.datatypes import DataType
-from softplc.tags import Quality, TagDef
+from softplc.core.datatypes import DataType
+from softplc.core.tags import Quality, TagDef
 
 VARIANT_TYPES: dict[DataType, ua.VariantType] = {
     DataType.BOOL: ua.VariantType.Boolean,
@@ -100,7 +100,7 @@ def data_value(definition: TagDef, value: Any, quality: Quality, epoch_seconds: 
 
 
 _GOOD = STATUS_CODES[Quality.GOOD]
-# A forced tag (softplc/forcing.py) whose value is good: the status OPC UA has for a local override.
+# A forced tag (softplc/core/forcing.py) whose value is good: the status OPC UA has for a local override.
 FORCED_STATUS = ua.StatusCode(ua.StatusCodes.GoodLocalOverride)
 
 

@@ -13,11 +13,11 @@ session's Write goes through) by `TagAttributeService`, which answers each item 
     BadTypeMismatch           wrong type (see `variants.value_from_variant` for the lossless
                               conversions accepted)
     BadOutOfRange             outside the tag's min/max, or outside its type's range
-    BadLocked                 the tag is forced (softplc/forcing.py): unforce it first
+    BadLocked                 the tag is forced (softplc/core/forcing.py): unforce it first
     BadWriteNotSupported      a StatusCode other than Good (clients cannot set quality)
     BadIndexRangeInvalid      an IndexRange (tags are scalars)
 
-The access rules are the tag database's (`TagDatabase.validate`, `softplc.roles`), the same for
+The access rules are the tag database's (`TagDatabase.validate`, `softplc.core.roles`), the same for
 every protocol; each item of a Write is submitted with the session's `Origin` (user, the
 client's address, role), so the database reports it, accepted or refused, to its write
 listeners (the audit trail).
@@ -53,8 +53,8 @@ from asyncua.server.address_space import AddressSpace, AttributeService
 
 from softplc.opcua.roles import role_of
 from softplc.opcua.variants import WriteStatus, value_from_variant
-from softplc.roles import Role
-from softplc.tagdb import Origin, Rule, TagDatabase, WriteRejected
+from softplc.core.roles import Role
+from softplc.core.tagdb import Origin, Rule, TagDatabase, WriteRejected
 
 log = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from softplc.tagdb import TagDatabase
+from softplc.core.tagdb import TagDatabase
 
 WAITING, TO_SOURCE, TO_DESTINATION, AT_DESTINATION = 0, 1, 3, 4
 PROGRESSING = ("moving", "planning")  # navigation states of a robot getting on with its trip

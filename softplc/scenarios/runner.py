@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from softplc.clock import SimClock
+from softplc.core.clock import SimClock
 from softplc.config import PlantConfig
 from softplc.runtime import Adapter, Runtime
 from softplc.scenarios.plant import build_plant

@@ -6,7 +6,7 @@ from typing import Any
 
 from softplc.scenarios.recorder import Recorder
 from softplc.scenarios.spec import Scenario
-from softplc.tagdb import TagDatabase
+from softplc.core.tagdb import TagDatabase
 
 
 def summarise(scenario: Scenario, db: TagDatabase, recorder: Recorder, duration: float, stop_reason: str) -> dict[str, Any]:

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from typing import Any, Protocol, TypeVar
 
-from softplc.clock import Clock
-from softplc.commands import CommandRefused
+from softplc.core.clock import Clock
+from softplc.core.commands import CommandRefused
 from softplc.storage.database import driver_errors
 
 Query = TypeVar("Query", contravariant=True)

@@ -1,7 +1,7 @@
 """How a log line looks: text for people, one JSON object per line for log shippers.
 
-    2026-11-24T10:49:03.123Z softplc: ERROR: program fill_t01 FAULTED: ZeroDivisionError: ... [softplc.program.fill_t01]
-    {"time": "2026-11-24T10:49:03.123Z", "level": "ERROR", "logger": "softplc.program.fill_t01", "message": "...", "exception": "Traceback ..."}
+    2026-11-24T10:49:03.123Z softplc: ERROR: program fill_t01 FAULTED: ZeroDivisionError: ... [softplc.core.program.fill_t01]
+    {"time": "2026-11-24T10:49:03.123Z", "level": "ERROR", "logger": "softplc.core.program.fill_t01", "message": "...", "exception": "Traceback ..."}
 
 Times are UTC (ISO 8601, milliseconds). Under `softplc run --sim` they are the runtime clock's
 wall time (simulated, from 2026-01-01T00:00:00Z), so a simulated run's log lines up with its

@@ -3,7 +3,7 @@
     softplc run --log-file /var/log/softplc/plant.log --log-max-size 20MB --log-backups 10 --log-format json
 
 - every line has a UTC timestamp (the runtime clock's under `--sim`: `use_clock`), its level and
-  its logger (`softplc.program.NAME` for a program's own lines and its faults);
+  its logger (`softplc.core.program.NAME` for a program's own lines and its faults);
 - `-v` shows debug lines and the tracebacks of program faults, `-vv` also asyncua's and
   pymodbus's debug lines; `-q` only warnings and errors;
 - `--log-file PATH` writes the log there, rotated at `--log-max-size` into `--log-backups` old
@@ -29,7 +29,7 @@ from softplc.util.log_format import JsonFormatter, PlantTime, TextFormatter
 from softplc.util.log_limit import DEFAULT_BURST, DEFAULT_INTERVAL, DEFAULT_LOGGER_BURST, FloodFilter
 
 if TYPE_CHECKING:
-    from softplc.clock import Clock
+    from softplc.core.clock import Clock
 
 LOG_FORMATS = ("text", "json")
 DEFAULT_MAX_BYTES = 10 * 1024 * 1024

@@ -1,7 +1,7 @@
 // Forcing from the HMI (engineers): force, unforce, unforce and restore — each after a confirmation
 // that shows the change as "old → new unit" — and the red "F" every forced value carries.
 //
-// The semantics are the runtime's (softplc/forcing.py, CODESYS-like): programs read the forced
+// The semantics are the runtime's (softplc/core/forcing.py, CODESYS-like): programs read the forced
 // value, their writes and every client's writes do not reach the tag until it is unforced.
 // The commands are tags.force / tags.unforce / tags.forces (commands.js); refusals show inline.
 

@@ -10,7 +10,7 @@ this API:
 - be told of changes (`db.on_change(callback)`), called after each batch is applied;
 - be told of every client write, accepted or refused, with its origin (`db.on_write(callback)`):
   the one place an audit trail or a write log listens, so no adapter keeps its own;
-- force and unforce tags (`db.force`, `db.unforce`, `db.forces`; see `softplc/forcing.py`).
+- force and unforce tags (`db.force`, `db.unforce`, `db.forces`; see `softplc/core/forcing.py`).
 
 Programs' outputs are committed by the scan engine with `db.commit(...)`.
 """
@@ -23,11 +23,11 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from softplc.datatypes import TypeMismatch
-from softplc.forcing import ForceChange, Forces
-from softplc.origin import Origin, origin_of
-from softplc.roles import Role
-from softplc.tags import Access, Quality, Tag, TagDef
+from softplc.core.datatypes import TypeMismatch
+from softplc.core.forcing import ForceChange, Forces
+from softplc.core.origin import Origin, origin_of
+from softplc.core.roles import Role
+from softplc.core.tags import Access, Quality, Tag, TagDef
 
 __all__ = ["Origin", "Rule", "TagDatabase", "Write", "WriteEvent", "WriteRejected", "origin_of"]
 
@@ -138,7 +138,7 @@ class TagDatabase:
     def validate(self, name: str, value: Any, *, role: Role | None = Role.OPERATOR) -> Any:
         """Return `value` coerced to the tag's type, or raise WriteRejected.
 
-        `role` is the writer's (see `softplc.roles`); `None` is code inside the runtime
+        `role` is the writer's (see `softplc.core.roles`); `None` is code inside the runtime
         (programs, drivers), to which no access rule applies.
         """
         tag = self._tags.get(name)

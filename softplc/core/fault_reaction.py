@@ -21,7 +21,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from softplc.tags import TagDef
+from softplc.core.tags import TagDef
 
 HOLD = "hold"
 INITIAL = "initial"

@@ -6,7 +6,7 @@ import enum
 from dataclasses import dataclass, field
 from typing import Any
 
-from softplc.datatypes import DataType
+from softplc.core.datatypes import DataType
 
 
 class Quality(enum.Enum):
@@ -59,7 +59,7 @@ class Tag:
         self.value: Any = definition.initial
         self.quality = Quality.GOOD
         self.timestamp = timestamp
-        self.forced = False  # pinned by an engineer (softplc/forcing.py): adapters show it
+        self.forced = False  # pinned by an engineer (softplc/core/forcing.py): adapters show it
 
     @property
     def name(self) -> str:

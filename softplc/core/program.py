@@ -23,7 +23,7 @@ import logging
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from softplc.clock import Clock
+from softplc.core.clock import Clock
 from softplc.util.durations import parse_duration
 
 _MISSING: Any = object()
@@ -112,7 +112,7 @@ class ProgramContext:
 
 def program_log(name: str) -> logging.Logger:
     """The logger of program instance NAME: its own lines, its faults and restarts."""
-    return logging.getLogger(f"softplc.program.{name}")
+    return logging.getLogger(f"softplc.core.program.{name}")
 
 
 class Program:

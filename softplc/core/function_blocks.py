@@ -22,7 +22,7 @@ import contextlib
 import contextvars
 from collections.abc import Iterator
 
-from softplc.clock import Clock
+from softplc.core.clock import Clock
 
 # The IEC names are kept on purpose (TON, IN, PT, Q, ET, CU, PV, CV): PLC engineers know them.
 # ruff: noqa: N802, N803, N815

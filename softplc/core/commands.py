@@ -24,14 +24,14 @@ from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from softplc.roles import Role
-from softplc.tagdb import Origin, origin_of
+from softplc.core.roles import Role
+from softplc.core.tagdb import Origin, origin_of
 
 log = logging.getLogger(__name__)
 
 
 class Permission(enum.Enum):
-    """What a command needs of the caller's role (`softplc.roles`)."""
+    """What a command needs of the caller's role (`softplc.core.roles`)."""
 
     VIEW = "view"  # any role: reading state (lists, details)
     ACKNOWLEDGE = "acknowledge"  # operator and engineer: alarm actions, resets

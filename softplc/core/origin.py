@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from softplc.roles import Role
+from softplc.core.roles import Role
 
 
 @dataclass(frozen=True, slots=True)

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from softplc.origin import Origin
+from softplc.core.origin import Origin
 
 
 @dataclass(frozen=True, slots=True)
