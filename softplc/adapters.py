@@ -80,7 +80,7 @@ def build_adapters(config: PlantConfig, args: argparse.Namespace | None = None) 
 
     Raises one ConfigError with the problems of every adapter's section, not just the first's.
     """
-    from softplc.yamlsource import ConfigError, Problem
+    from softplc.config.yamlsource import ConfigError, Problem
 
     # The audit trail first: it listens before any client can write, and stops last. Alarms
     # next: the OPC UA server lists them (as conditions) when it starts; the historian before it
@@ -146,7 +146,7 @@ def _modbus(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapte
 
 def _opcua_settings(config: PlantConfig, args: argparse.Namespace | None) -> OpcUaSettings:
     from softplc.opcua.settings import OpcUaSettings, SettingsError
-    from softplc.yamlsource import ConfigError
+    from softplc.config.yamlsource import ConfigError
 
     try:
         settings = OpcUaSettings.from_section(config.section("servers", "opcua"), config.base_dir)

@@ -27,8 +27,8 @@ from softplc.config import PlantConfig, load_config
 from softplc.util.console import print_table
 from softplc.util.durations import format_duration
 from softplc.core.expression import Condition, ExpressionError
-from softplc.sections import editor_schema
-from softplc.yamlsource import ConfigError
+from softplc.config.sections import editor_schema
+from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
     from softplc.retain import RetainError

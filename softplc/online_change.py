@@ -35,7 +35,7 @@ from softplc.program_instance import ProgramInstance, ProgramState
 from softplc.util.realtime import shorten_switch_interval
 from softplc.scan import ScanEngine, Task
 from softplc.scan_gate import ScanGate
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 log = logging.getLogger(__name__)
 

@@ -33,7 +33,7 @@ from softplc.scan import ProgramInstance, ProgramState, ScanEngine, Task
 from softplc.stall import StallDetector
 from softplc.systags import SystemTags, runtime_tag_definitions
 from softplc.core.tagdb import TagDatabase, WriteRejected
-from softplc.yamlsource import ConfigError, Location, Problem
+from softplc.config.yamlsource import ConfigError, Location, Problem
 
 log = logging.getLogger(__name__)
 

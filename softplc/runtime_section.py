@@ -5,11 +5,11 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from softplc.util.durations import check_duration
-from softplc.schema import DURATION, Section
+from softplc.config.schema import DURATION, Section
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 SCHEMA: dict[str, Any] = {
     "type": "object",

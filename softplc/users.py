@@ -25,7 +25,7 @@ from typing import Any
 import yaml
 from softplc.passwords import SCRYPT_LOG2_N, hash_password, verify_password
 from softplc.core.roles import ROLE_NAMES, Role
-from softplc.yamlsource import ConfigError, load_yaml
+from softplc.config.yamlsource import ConfigError, load_yaml
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """A section owner written the way a new adapter writes one: `notebook:` at the top level, a
 `notebook:` key on tags and templates, and a `record:` key on programs. tests/test_config_sections.py
-plugs it into the registry (softplc.sections.SECTION_MODULES)."""
+plugs it into the registry (softplc.config.sections.SECTION_MODULES)."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ from typing import TYPE_CHECKING, Any
 
 from softplc.core.datatypes import DataType
 from softplc.util.durations import check_duration
-from softplc.schema import DURATION, Section
+from softplc.config.schema import DURATION, Section
 from softplc.core.tags import Access, TagDef
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 SCHEMA: dict[str, Any] = {
     "type": "object",

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from softplc import sections
+from softplc.config import sections
 from softplc.adapters import build_adapters
 from softplc.audit.settings import DEFAULT_PARTITION, DEFAULT_RETENTION, AuditSettings
 from softplc.cli import build_parser, main

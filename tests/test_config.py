@@ -10,7 +10,7 @@ import yaml
 
 from softplc.config import PlantConfig, load_config
 from softplc.core.datatypes import DataType
-from softplc.sections import config_schema
+from softplc.config.sections import config_schema
 from softplc.core.tags import Access
 
 from conftest import REPO

@@ -14,7 +14,7 @@ import pytest
 
 from softplc.cli import main
 from softplc.config import load_config
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 from conftest import REPO
 

@@ -12,12 +12,12 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from softplc import schema, sections
+from softplc.config import schema, sections
 from softplc.cli import main
 from softplc.core.roles import Role
 from softplc.config import load_config
-from softplc.schema import RegistryError, Section
-from softplc.yamlsource import ConfigError
+from softplc.config.schema import RegistryError, Section
+from softplc.config.yamlsource import ConfigError
 
 from conftest import REPO
 
@@ -71,7 +71,7 @@ PLANT = f"""\
 
 def test_every_owner_module_is_light_to_import() -> None:
     # Loading a configuration imports every owner; `softplc --help` and `softplc schema` must stay fast.
-    script = ("import sys, json; from softplc.sections import editor_schema; editor_schema(); "
+    script = ("import sys, json; from softplc.config.sections import editor_schema; editor_schema(); "
               f"print(json.dumps(sorted({{n.split('.')[0] for n in sys.modules}} & set({list(HEAVY)!r}))))")
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=REPO, timeout=60, check=True)
     assert json.loads(result.stdout) == []

@@ -12,7 +12,7 @@ from softplc.cli import main
 from softplc.config import load_config
 from softplc.fleet import Compatibility, Hardware, compatibility_matrix, compatible, load_robots, load_tasks
 from softplc.fleet.robots import DriverKind, parse_robots, parse_tasks
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 from conftest import REPO
 

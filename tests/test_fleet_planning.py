@@ -11,7 +11,7 @@ import pytest
 from softplc.fleet.floor import Floor
 from softplc.fleet.gridmap import OccupancyGrid, grid_from_text, load_map, read_pgm
 from softplc.fleet.planner import Corridor, Disc, PathPlanner
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 from conftest import REPO
 

@@ -125,7 +125,7 @@ async def test_quality_changes_are_recorded(tmp_path: Path) -> None:
 
 
 def test_problems_in_the_history_section_are_located(make_config) -> None:
-    from softplc.yamlsource import ConfigError
+    from softplc.config.yamlsource import ConfigError
 
     with pytest.raises(ConfigError) as raised:  # softplc check and run: the section's owner reports them
         make_config(textwrap.dedent(f"""\
@@ -154,7 +154,7 @@ def test_problems_in_the_history_section_are_located(make_config) -> None:
 
 
 def test_a_partition_of_zero_is_refused_like_the_audit_trails(make_config) -> None:
-    from softplc.yamlsource import ConfigError
+    from softplc.config.yamlsource import ConfigError
 
     with pytest.raises(ConfigError) as raised:  # a store cut into partitions of 0 s could hold no row
         make_config("version: 1\ntags:\n  level: {type: float64}\nhistory:\n  partition: 0\n  record: [{tags: level}]\n")
@@ -217,7 +217,7 @@ async def test_a_store_that_cannot_be_opened_stops_the_start_with_the_reason(tmp
 def test_a_tags_own_history_key_and_its_templates_are_rules(make_config) -> None:
     from softplc.history.section import tag_rules
     from softplc.history.settings import HistorySettings
-    from softplc.yamlsource import ConfigError
+    from softplc.config.yamlsource import ConfigError
 
     config = make_config("""\
         version: 1

@@ -13,7 +13,7 @@ from softplc.cli import main
 from softplc.config import load_config
 from softplc.hmi.settings import HmiSettings, hmi_problems
 from softplc.core.roles import Role
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 BAD_VIEW = """
 hmi:

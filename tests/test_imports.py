@@ -96,10 +96,10 @@ def test_no_import_cycle_inside_softplc() -> None:
 
 def test_the_graph_sees_every_kind_of_import() -> None:
     graph = import_graph()
-    assert "softplc.config.plant" in graph["softplc.sections"]  # under TYPE_CHECKING
+    assert "softplc.config.plant" in graph["softplc.config.sections"]  # under TYPE_CHECKING
     assert "softplc.latency.client_process" in graph["softplc.latency.measurement"]  # inside a function
     assert "softplc.opcua.cli" in graph["softplc.cli"]  # COMMAND_MODULES
-    assert "softplc.modbus.section" in graph["softplc.sections"]  # SECTION_MODULES
+    assert "softplc.modbus.section" in graph["softplc.config.sections"]  # SECTION_MODULES
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 

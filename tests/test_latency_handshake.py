@@ -188,7 +188,7 @@ async def test_running_task_and_no_switch_without_a_new_taskid(tmp_path):
 
 
 def test_unknown_scenario_faults_the_program(tmp_path):
-    from softplc.yamlsource import ConfigError
+    from softplc.config.yamlsource import ConfigError
 
     # A bad duration is a configuration error with its location...
     with pytest.raises(ConfigError):

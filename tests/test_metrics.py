@@ -238,7 +238,7 @@ async def test_anonymous_scrapes_from_loopback_by_default_and_a_broken_adapter_i
 
 async def test_mistakes_in_the_metrics_settings_are_located_problems(tmp_path: Path) -> None:
     from hmi_support import plant_yaml, write_plant
-    from softplc.yamlsource import ConfigError
+    from softplc.config.yamlsource import ConfigError
 
     text = plant_yaml().replace("    port: 0\n", "    port: 0\n    metrics: {anonymous: everyone, token_file: \"\"}\n")
     with pytest.raises(ConfigError) as raised:

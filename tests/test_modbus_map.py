@@ -14,7 +14,7 @@ from softplc.cli import main
 from softplc.core.datatypes import DataType
 from softplc.modbus.address_map import Table, build_address_map
 from softplc.modbus.codec import CodecError, RegisterCodec
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 BASE = """
 version: 1
@@ -298,7 +298,7 @@ def test_system_tags_that_do_not_fit_are_left_out_with_a_warning(make_config, ca
 
 
 def test_a_template_too_big_for_modbus_is_one_message_not_one_per_instance(make_config) -> None:
-    from softplc.yamlsource import ConfigError
+    from softplc.config.yamlsource import ConfigError
 
     with pytest.raises(ConfigError) as raised:
         make_config("""\

@@ -11,7 +11,7 @@ import pytest
 from conftest import REPO
 from softplc.cli import main
 from softplc.scenarios.spec import load_scenario
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 
 def cli(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:

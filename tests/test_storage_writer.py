@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from softplc.storage import BatchWriter, Database, StorageError, StorageSettings, parse_span, storage_problems
-from softplc.yamlsource import parse_yaml
+from softplc.config.yamlsource import parse_yaml
 
 
 class Notes:

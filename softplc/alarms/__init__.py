@@ -12,7 +12,7 @@ from softplc.util.lazy import lazy_exports
 if TYPE_CHECKING:
     from softplc.alarms.model import AlarmSnapshot, AlarmState, Priority, Transition
 
-# Imported on first use: softplc.schema imports softplc.alarms.schema, so this package loads
+# Imported on first use: softplc.config.schema imports softplc.alarms.schema, so this package loads
 # with every configuration and must stay light.
 _MODULES = {"softplc.alarms.model": ("AlarmSnapshot", "AlarmState", "Priority", "Transition")}
 __getattr__, __dir__ = lazy_exports(__name__, _MODULES)

@@ -1,6 +1,6 @@
 """The JSON Schema of the `alarms:` section (structure only; `settings.py` checks the meaning).
 
-It imports nothing that imports `softplc.schema`: that module builds the section with its own
+It imports nothing that imports `softplc.config.schema`: that module builds the section with its own
 DURATION (so `softplc schema` tightens durations here as everywhere), without an import cycle.
 """
 

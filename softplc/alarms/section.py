@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 from softplc.alarms.schema import alarms_schema
 from softplc.alarms.settings import alarm_problems
 from softplc.alarms.summary import summary_tag_definitions
-from softplc.schema import DURATION, Section
+from softplc.config.schema import DURATION, Section
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

@@ -28,12 +28,12 @@ from softplc.config.plant import PlantConfig
 from softplc.core.datatypes import TypeMismatch
 from softplc.util.durations import parse_duration
 from softplc.core.expression import Condition, ExpressionError
-from softplc.schema import NAME_PATTERN, NAME_RULE
+from softplc.config.schema import NAME_PATTERN, NAME_RULE
 from softplc.storage.settings import parse_span, storage_problems
 from softplc.util.suggest import did_you_mean
 from softplc.systags import system_tag_definitions
 from softplc.core.tags import TagDef
-from softplc.yamlsource import ConfigError, Location, Problem
+from softplc.config.yamlsource import ConfigError, Location, Problem
 
 SECTION = "alarms"
 DEFAULT_SHELVE_MAX = 8 * 3600.0

@@ -3,6 +3,6 @@
 from __future__ import annotations
 
 from softplc.audit.settings import AUDIT_SCHEMA, problems
-from softplc.schema import Section
+from softplc.config.schema import Section
 
 SECTION = Section(path=("audit",), schema=AUDIT_SCHEMA, problems=problems)

@@ -22,7 +22,7 @@ from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 DEFAULT_FILE = "audit.sqlite"
 SIM_FILE = "audit-sim.sqlite"  # --sim runs: simulated timestamps, never mixed with the plant's own trail

@@ -6,7 +6,7 @@ One module per concept: `plant` (what a checked configuration is), `loader` (the
 checks), `schema_check` (JSON Schema violations as messages), `tags` and `templates` (tag
 declarations), `tasks` and `programs` (tasks, program classes, bindings, parameters),
 `outputs` (tags written by two programs), `findings` (problems said once). The sections other
-modules own (servers, fleet, runtime...) are checked through `softplc.sections`.
+modules own (servers, fleet, runtime...) are checked through `softplc.config.sections`.
 """
 
 from softplc.config.loader import check_config, load_config, parse_config

@@ -13,7 +13,7 @@ import re
 from collections.abc import Sequence
 from typing import Any
 
-from softplc.yamlsource import Location, Problem, SourceMap
+from softplc.config.yamlsource import Location, Problem, SourceMap
 
 SHOWN_INSTANCES = 6  # instances listed in a grouped message before "and N more"
 _QUOTED = re.compile(r"'[^']*'")

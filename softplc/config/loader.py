@@ -17,8 +17,8 @@ from softplc.config.reactions import legacy_problems
 from softplc.config.schema_check import describe, schema_check
 from softplc.config.tags import TagChecker
 from softplc.config.tasks import TaskChecker
-from softplc.sections import config_schema, contributed_tags, section_problems
-from softplc.yamlsource import ConfigError, SourceMap, load_yaml, parse_yaml
+from softplc.config.sections import config_schema, contributed_tags, section_problems
+from softplc.config.yamlsource import ConfigError, SourceMap, load_yaml, parse_yaml
 
 
 def load_config(path: str | Path, *, load_module: ModuleLoader | None = None) -> PlantConfig:

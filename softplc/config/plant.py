@@ -11,7 +11,7 @@ from softplc.core.program import Program
 from softplc.core.fault_reaction import FaultReaction
 from softplc.program_instance import NEVER, RestartPolicy
 from softplc.core.tags import TagDef
-from softplc.yamlsource import Location, Problem, SourceMap
+from softplc.config.yamlsource import Location, Problem, SourceMap
 
 SYSTEM_PREFIX = "_sys."
 
@@ -28,7 +28,7 @@ class ProgramConfig:
     restart: RestartPolicy = NEVER
     enabled: bool = True
     location: Location | None = None  # where the program is named in the file (for errors)
-    options: dict[str, Any] = field(default_factory=dict)  # keys owners add to programs (softplc.sections)
+    options: dict[str, Any] = field(default_factory=dict)  # keys owners add to programs (softplc.config.sections)
     on_fault: FaultReaction = field(default_factory=FaultReaction)  # what its outputs do when it faults
     path: tuple[Any, ...] = ()  # its item in the file: ("tasks", TASK, "programs", INDEX)
 

@@ -20,7 +20,7 @@ from softplc.util.durations import check_duration
 from softplc.core.fault_reaction import HOLD, INITIAL, FaultReaction
 from softplc.program_instance import NEVER, RestartPolicy
 from softplc.util.suggest import did_you_mean
-from softplc.yamlsource import Problem, SourceMap
+from softplc.config.yamlsource import Problem, SourceMap
 
 LEGACY_KEYS = ("restart_delay", "max_restarts")
 LEGACY_ON_FAULT = ("stop", "restart")

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from softplc.schema import NAME_RULE
+from softplc.config.schema import NAME_RULE
 from softplc.util.suggest import did_you_mean
-from softplc.yamlsource import Problem, SourceMap
+from softplc.config.yamlsource import Problem, SourceMap
 
 if TYPE_CHECKING:
     import jsonschema

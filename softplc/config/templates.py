@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import Any
 
 from softplc.config.findings import Findings
-from softplc.schema import NAME_PATTERN, NAME_RULE
+from softplc.config.schema import NAME_PATTERN, NAME_RULE
 from softplc.util.suggest import did_you_mean
-from softplc.yamlsource import ConfigError, Location, SourceMap, load_yaml
+from softplc.config.yamlsource import ConfigError, Location, SourceMap, load_yaml
 
 # template → instance → tag → (initial value, where it is written), from instances_from
 ExternalInitials = dict[str, dict[str, tuple[Any, Location]]]

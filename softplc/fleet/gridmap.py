@@ -22,7 +22,7 @@ import numpy as np
 from scipy import ndimage
 
 from softplc.config import schema_problems
-from softplc.yamlsource import ConfigError, Location, Problem, load_yaml
+from softplc.config.yamlsource import ConfigError, Location, Problem, load_yaml
 
 MAP_SCHEMA: dict[str, Any] = {
     "type": "object",

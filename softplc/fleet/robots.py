@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from softplc.config import did_you_mean, schema_problems
-from softplc.schema import NAME_PATTERN
-from softplc.yamlsource import ConfigError, Problem, SourceMap, load_yaml, parse_yaml
+from softplc.config.schema import NAME_PATTERN
+from softplc.config.yamlsource import ConfigError, Problem, SourceMap, load_yaml, parse_yaml
 
 
 class Hardware(enum.Enum):

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from softplc.schema import DURATION, NAME_PATTERN, Section
+from softplc.config.schema import DURATION, NAME_PATTERN, Section
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 SCHEMA: dict[str, Any] = {
     "description": "Mobile robots driven by the runtime (softplc.fleet; docs/robots.md).",
@@ -34,7 +34,7 @@ def problems(config: PlantConfig) -> list[Problem]:
     if config.section("fleet") is None:
         return []
     from softplc.fleet.settings import FleetSettings
-    from softplc.yamlsource import ConfigError
+    from softplc.config.yamlsource import ConfigError
 
     try:
         FleetSettings.from_config(config)

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from softplc.util.durations import parse_duration
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

@@ -17,13 +17,13 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from softplc.history.settings import HISTORY_SCHEMA, RULE_SCHEMA, problems, tag_rule
-from softplc.schema import Section
+from softplc.config.schema import Section
 from softplc.systags import runtime_tag_definitions
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
     from softplc.history.settings import Rule
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 TAG_KEY: dict[str, Any] = {
     "description": "Record this tag's history: true, false, or a rule (deadband, compression) without 'tags'.",

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, partitioned_spans, span_problems, storage_problems
-from softplc.yamlsource import Problem
+from softplc.config.yamlsource import Problem
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

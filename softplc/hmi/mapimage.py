@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from softplc.yamlsource import load_yaml
+from softplc.config.yamlsource import load_yaml
 
 FREE, OCCUPIED, UNKNOWN = (246, 244, 238), (55, 63, 78), (200, 203, 208)
 

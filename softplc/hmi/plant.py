@@ -12,7 +12,7 @@ import logging
 from typing import TYPE_CHECKING, Any
 
 from softplc.hmi.mapimage import MapImage, render_map
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from softplc.hmi.settings import HMI_SECTION, HMI_SERVER, settings_problems
 from softplc.hmi.views import view_problems
-from softplc.schema import Section
+from softplc.config.schema import Section
 
 SECTIONS = (
     Section(path=("servers", "hmi"), schema=HMI_SERVER, problems=settings_problems),

@@ -38,7 +38,7 @@ from softplc.hmi.views import View, load_views
 from softplc.hmi.writelog import WriteLog
 from softplc.logins import PasswordLogins
 from softplc.users import UserStore
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

@@ -1,7 +1,7 @@
 """HMI settings: the `servers: hmi:` section (where and how it serves) and the `hmi:` section (views).
 
 Both sections' JSON Schema fragments are plain data here (`HMI_SERVER`, `HMI_SECTION`), wired
-into `softplc.schema`; what a schema cannot say (a duration's form, a host name, files that
+into `softplc.config.schema`; what a schema cannot say (a duration's form, a host name, files that
 must exist, user views bound to tags and SVG ids) is checked by `hmi_problems(config)`, which
 returns located `Problem`s for `softplc check` and `softplc run`. Nothing here imports aiohttp.
 """
@@ -20,7 +20,7 @@ from softplc.core.roles import Role
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
@@ -253,7 +253,7 @@ def hmi_problems(config: PlantConfig) -> list[Problem]:
 
 def settings_problems(config: PlantConfig) -> list[Problem]:
     """Durations, the host's form and TLS files of `servers.hmi`."""
-    from softplc.yamlsource import Location, Problem
+    from softplc.config.yamlsource import Location, Problem
 
     section = config.servers.get("hmi")
     if not isinstance(section, dict):

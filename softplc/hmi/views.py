@@ -33,7 +33,7 @@ from softplc.core.tags import TagDef
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 EXPRESSION_PREFIX = "="  # live items named "=<expression>" carry an expression's value; tag names never start so
 _COLOR = re.compile(r"^(#[0-9a-fA-F]{3,8}|[a-zA-Z]{3,30}|(rgb|rgba|hsl|hsla)\([0-9., %/+-]{1,60}\))$")
@@ -101,7 +101,7 @@ class _ViewCompiler:
         self.expressions: dict[str, Condition] = {}
 
     def problem(self, path: tuple[Any, ...], message: str, *, at_key: bool = False) -> None:
-        from softplc.yamlsource import Location, Problem
+        from softplc.config.yamlsource import Location, Problem
 
         source = self.config.source
         full = (*self.base, *path)

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 METRICS_SCHEMA: dict[str, Any] = {
     "description": "Prometheus metrics at /metrics on the HMI's port (docs/operations.md, \"Metrics\").",
@@ -68,7 +68,7 @@ def metrics_problems(config: PlantConfig) -> list[Problem]:
     section = hmi.get("metrics") if isinstance(hmi, dict) else None
     if not isinstance(section, dict) or section.get("token_file") != "":
         return []
-    from softplc.yamlsource import Location, Problem
+    from softplc.config.yamlsource import Location, Problem
 
     path = ("servers", "hmi", "metrics", "token_file")
     message = "token_file is empty: name a file (e.g. metrics.token) or leave the key out"

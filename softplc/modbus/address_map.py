@@ -32,7 +32,7 @@ from softplc.modbus.codec import REGISTER_TYPES, RegisterCodec, register_words
 from softplc.modbus.settings import ModbusSettings
 from softplc.systags import runtime_tag_definitions
 from softplc.core.tags import Access, TagDef
-from softplc.yamlsource import ConfigError, Location, Problem, SourceMap
+from softplc.config.yamlsource import ConfigError, Location, Problem, SourceMap
 
 ADDRESS_SPACE = 65536
 log = logging.getLogger(__name__)

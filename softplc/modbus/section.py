@@ -5,11 +5,11 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from softplc.modbus.settings import ModbusSettings, settings_problems
-from softplc.schema import DURATION, Section
+from softplc.config.schema import DURATION, Section
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 SCHEMA: dict[str, Any] = {
     "type": "object",
@@ -54,7 +54,7 @@ def problems(config: PlantConfig) -> list[Problem]:
     # Addresses pinned in the tags are checked even while the server is off.
     if settings.enabled or any("modbus" in tag.options for tag in config.tags):
         from softplc.modbus.address_map import build_address_map
-        from softplc.yamlsource import ConfigError
+        from softplc.config.yamlsource import ConfigError
 
         try:
             build_address_map(config, settings)

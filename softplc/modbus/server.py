@@ -39,7 +39,7 @@ from softplc.modbus.requests import LIMITS, RequestGuard, guarded_requests
 from softplc.modbus.settings import ModbusSettings, settings_problems
 from softplc.runtime import AdapterError, Runtime
 from softplc.core.tagdb import Origin, Rule, TagDatabase
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 log = logging.getLogger(__name__)
 

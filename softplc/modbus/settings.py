@@ -12,7 +12,7 @@ from softplc.util.durations import parse_duration
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 5020  # 502 needs root; integrators point their client at 5020 or override

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from softplc.core.roles import ROLE_NAMES
-from softplc.yamlsource import load_yaml
+from softplc.config.yamlsource import load_yaml
 
 if TYPE_CHECKING:  # the rest of softplc.opcua needs asyncua: each command imports what it uses
     from softplc.opcua.security import Pki

@@ -214,7 +214,7 @@ def where(args: argparse.Namespace) -> tuple[str, str]:
 
 def _opcua_section(config: str | None) -> dict[str, object]:
     """servers.opcua of the configuration (only that: the rest of the file is not checked); {} without a file."""
-    from softplc.yamlsource import ConfigError, load_yaml
+    from softplc.config.yamlsource import ConfigError, load_yaml
 
     path = Path(config or DEFAULT_CONFIG)
     if not path.is_file():

@@ -5,11 +5,11 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from softplc.opcua.settings import POLICIES, OpcUaSettings, SettingsError
-from softplc.schema import Section
+from softplc.config.schema import Section
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 SCHEMA: dict[str, Any] = {
     "type": "object",

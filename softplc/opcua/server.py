@@ -48,7 +48,7 @@ from softplc.opcua.transport import ConnectionLimits, GuardedServer
 from softplc.opcua.user_manager import SoftplcUserManager
 from softplc.users import UserStore
 from softplc.opcua.writes import MAX_NODES_PER_READ, MAX_NODES_PER_WRITE, TagAttributeService
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
     from softplc.runtime import Runtime

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from softplc.scenarios.spec import DISPATCHERS, STOPS, builtin_scenarios, find_scenario, load_scenario
-from softplc.yamlsource import ConfigError
+from softplc.config.yamlsource import ConfigError
 
 EXIT_OK, EXIT_FAILURE = 0, 1
 

@@ -15,7 +15,7 @@ import yaml
 
 from softplc.config import PlantConfig, parse_config
 from softplc.scenarios.spec import PROJECT, Scenario
-from softplc.yamlsource import ConfigError, Location, Problem, load_yaml
+from softplc.config.yamlsource import ConfigError, Location, Problem, load_yaml
 
 ROBOT_TAGS: dict[str, dict[str, Any]] = {
     "xpos": {"type": "float64", "unit": "m", "access": "ro", "description": "x position"},

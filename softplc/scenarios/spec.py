@@ -13,8 +13,8 @@ from typing import Any
 
 from softplc.config import did_you_mean, schema_problems
 from softplc.fleet.robots import HARDWARE_NAMES
-from softplc.schema import NAME_PATTERN
-from softplc.yamlsource import ConfigError, SourceMap, load_yaml
+from softplc.config.schema import NAME_PATTERN
+from softplc.config.yamlsource import ConfigError, SourceMap, load_yaml
 
 PROJECT = Path(__file__).resolve().parent.parent.parent
 BUILTIN_DIR = PROJECT / "scenarios"

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from softplc.util.durations import parse_duration
-from softplc.yamlsource import Problem, SourceMap
+from softplc.config.yamlsource import Problem, SourceMap
 
 BACKENDS = ("sqlite", "postgresql")
 DEFAULT_FLUSH_PERIOD = 1.0

@@ -2,7 +2,7 @@
 
 The core's sections (plant, tags, templates, tasks) are declared here; every other section,
 and the keys adapters add to tags, templates and programs, come from their owners, which
-`softplc.sections` lists (it assembles what `softplc check` uses and `softplc schema` prints).
+`softplc.config.sections` lists (it assembles what `softplc check` uses and `softplc schema` prints).
 What a schema cannot say (a binding to a missing tag, an initial value outside its type, a
 program class that does not exist) is checked in `softplc.config`.
 """
@@ -19,7 +19,7 @@ from softplc.util.durations import DURATION_REGEX
 if TYPE_CHECKING:
     from softplc.core.tags import TagDef
     from softplc.config.plant import PlantConfig
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
 NAME_RULE = "letters, digits and _, not starting with a digit"

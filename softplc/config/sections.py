@@ -2,12 +2,12 @@
 
 The core's own sections (plant, tags, templates, tasks) are checked in `softplc.config`. Every
 other part of the file belongs to a module that declares it with a `SECTION` (a
-`softplc.schema.Section`): where its mapping lives (`("servers", "modbus")`, `("fleet",)`), its
+`softplc.config.schema.Section`): where its mapping lives (`("servers", "modbus")`, `("fleet",)`), its
 JSON Schema, the keys it adds to every tag, template and program (their values land in
 `TagDef.options[key]` and `ProgramConfig.options[key]`), and a check for what a schema cannot
 say. To add a section, define `SECTION` in a light module and list the module in
 SECTION_MODULES (docs/runtime.md, "Adding a configuration section"). Owners import `Section`
-from `softplc.schema` and `PlantConfig` from `softplc.config.plant`, never this module or the
+from `softplc.config.schema` and `PlantConfig` from `softplc.config.plant`, never this module or the
 loader, so the registry stays free of import cycles (tests/test_imports.py).
 """
 
@@ -17,12 +17,12 @@ import functools
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from softplc.schema import Section, build_schema, check_registry, strict_durations
+from softplc.config.schema import Section, build_schema, check_registry, strict_durations
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
     from softplc.core.tags import TagDef
-    from softplc.yamlsource import Problem
+    from softplc.config.yamlsource import Problem
 
 # Modules that own a section (each defines SECTION, or SECTIONS for several), in the order their
 # problems are reported.
