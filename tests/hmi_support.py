@@ -28,7 +28,7 @@ from softplc.core.program import InOut, Input, Output, Program
 from softplc.core.roles import Role
 from softplc.runtime import Runtime
 from softplc.core.tagdb import Origin
-from softplc.users import UserStore
+from softplc.security.users import UserStore
 
 REPO = Path(__file__).resolve().parent.parent
 ARTIFACTS = REPO / "tests" / "artifacts" / "hmi"

@@ -141,7 +141,7 @@ def make_certificate(directory: Path, name: str) -> tuple[Path, Path, bytes]:
 
 async def test_remote_agent_logs_in_with_its_certificate_over_an_encrypted_channel(plant: Path) -> None:
     from softplc.opcua import Pki
-    from softplc.opcua.security import fingerprint
+    from softplc.security.certificates import fingerprint
 
     state = plant.parent / "state"
     certificate, key, der = make_certificate(plant.parent, "r01")

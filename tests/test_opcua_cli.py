@@ -19,7 +19,7 @@ from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.opcua import OpcUaServer, OpcUaSettings, UserStore
 from softplc.opcua.settings import SettingsError
-from softplc.users import verify_password
+from softplc.security.users import verify_password
 from softplc.runtime import AdapterError, Runtime
 from tests.conftest import REPO
 from tests.opcua_support import PLANT, write_config

@@ -14,7 +14,7 @@ import pytest
 
 from tests.conftest import REPO
 from softplc.opcua import Pki
-from softplc.opcua.security import fingerprint
+from softplc.security.certificates import fingerprint
 from tests.opcua_support import PASSWORDS, make_client_certificate, running_plant
 
 NODE_DIR = REPO / "tests" / "node"

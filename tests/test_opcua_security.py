@@ -14,7 +14,7 @@ import pytest_asyncio
 from asyncua import Client, ua
 
 from softplc.opcua import Pki, Role, UserStore
-from softplc.opcua.security import fingerprint
+from softplc.security.certificates import fingerprint
 from tests.conftest import REPO
 from softplc.opcua.client import make_client
 from tests.opcua_support import PASSWORDS, client_for, make_client_certificate, running_plant, wait_until

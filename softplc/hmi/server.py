@@ -36,8 +36,8 @@ from softplc.hmi.shell import Shell, builtin_pages
 from softplc.hmi.supervisory import add_supervisory
 from softplc.hmi.views import View, load_views
 from softplc.hmi.writelog import WriteLog
-from softplc.logins import PasswordLogins
-from softplc.users import UserStore
+from softplc.security.logins import PasswordLogins
+from softplc.security.users import UserStore
 from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:

@@ -1,6 +1,6 @@
 """Logins of the HMI: the OPC UA users file, session cookies and CSRF tokens.
 
-- A login is checked by `softplc.logins.PasswordLogins` (the same code as OPC UA logins: hashed
+- A login is checked by `softplc.security.logins.PasswordLogins` (the same code as OPC UA logins: hashed
   in a worker thread, throttled per address and user name, failures logged rate-limited).
 - A session is a random 256-bit token in an HttpOnly, SameSite=Strict cookie (Secure, with the
   `__Host-` prefix, under TLS), named after the port so two runtimes on one host keep theirs.
@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 from aiohttp import web
 
-from softplc.logins import PasswordLogins
+from softplc.security.logins import PasswordLogins
 from softplc.core.roles import Role
-from softplc.users import UserStore
+from softplc.security.users import UserStore
 
 CSRF_HEADER = "X-CSRF-Token"
 MAX_SESSIONS = 1000  # beyond this the least recently used session is forgotten

@@ -12,9 +12,9 @@ from softplc.core.roles import ROLE_NAMES
 from softplc.config.yamlsource import load_yaml
 
 if TYPE_CHECKING:  # the rest of softplc.opcua needs asyncua: each command imports what it uses
-    from softplc.opcua.security import Pki
+    from softplc.security.certificates import Pki
     from softplc.opcua.settings import OpcUaSettings
-    from softplc.users import UserStore
+    from softplc.security.users import UserStore
 
 EXIT_OK, EXIT_FAILURE = 0, 1
 
@@ -101,14 +101,14 @@ def _settings(args: argparse.Namespace) -> tuple[OpcUaSettings, Path]:
 
 
 def _pki(args: argparse.Namespace) -> Pki:
-    from softplc.opcua.security import Pki
+    from softplc.security.certificates import Pki
 
     settings, state_dir = _settings(args)
     return Pki(settings.pki_path(state_dir))
 
 
 def _store(args: argparse.Namespace) -> UserStore:
-    from softplc.users import UserStore
+    from softplc.security.users import UserStore
 
     settings, state_dir = _settings(args)
     return UserStore(settings.users_path(state_dir))  # a broken file raises ConfigError: FILE:LINE:COL
@@ -119,7 +119,7 @@ def _store(args: argparse.Namespace) -> UserStore:
 
 def cmd_certs(args: argparse.Namespace) -> int:
     from softplc.util.console import print_table
-    from softplc.opcua.security import describe_file
+    from softplc.security.certificates import describe_file
 
     pki = _pki(args)
     own = describe_file(pki.certificate_path) if pki.certificate_path.exists() else None
@@ -138,7 +138,7 @@ def cmd_certs(args: argparse.Namespace) -> int:
 
 
 def cmd_trust(args: argparse.Namespace) -> int:
-    from softplc.opcua.security import describe_file
+    from softplc.security.certificates import describe_file
 
     pki = _pki(args)
     try:
@@ -167,7 +167,7 @@ def cmd_untrust(args: argparse.Namespace) -> int:
 
 def cmd_users_add(args: argparse.Namespace) -> int:
     from softplc.core.roles import Role
-    from softplc.opcua.security import der_bytes, fingerprint, load_certificate_file
+    from softplc.security.certificates import der_bytes, fingerprint, load_certificate_file
 
     store = _store(args)
     certificate = None
@@ -195,7 +195,7 @@ def cmd_users_add(args: argparse.Namespace) -> int:
 
 
 def _read_password(args: argparse.Namespace) -> str | None:
-    from softplc.users import MIN_PASSWORD_LENGTH
+    from softplc.security.users import MIN_PASSWORD_LENGTH
 
     if args.password_stdin:
         password = sys.stdin.readline().rstrip("\r\n")

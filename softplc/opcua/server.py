@@ -41,12 +41,12 @@ from softplc.opcua.history_provider import CommandHistory  # the historian's com
 from softplc.opcua.publisher import Publisher
 from softplc.opcua.roles import RolePermissions
 from softplc.opcua.scheduling import ScanGuard
-from softplc.opcua.security import ClientCertificateValidator, Pki, SecuredChannels
+from softplc.security.certificates import ClientCertificateValidator, Pki, SecuredChannels
 from softplc.opcua.server_status import ServerStatusClock
 from softplc.opcua.settings import POLICIES, POLICY_NONE, POLICY_TEXT, OpcUaSettings
 from softplc.opcua.transport import ConnectionLimits, GuardedServer
 from softplc.opcua.user_manager import SoftplcUserManager
-from softplc.users import UserStore
+from softplc.security.users import UserStore
 from softplc.opcua.writes import MAX_NODES_PER_READ, MAX_NODES_PER_WRITE, TagAttributeService
 from softplc.config.yamlsource import ConfigError
 

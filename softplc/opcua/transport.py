@@ -45,7 +45,7 @@ from softplc.util.peers import PeerLog, peer_host
 from softplc.opcua.methods import CheckedMethodService
 from softplc.opcua.processor import DiscoveryOnlyNone, GuardedProcessor, PolicyRefused
 from softplc.opcua.scheduling import ScanGuard
-from softplc.opcua.security import SecuredChannels
+from softplc.security.certificates import SecuredChannels
 from softplc.opcua.settings import DEFAULT_MAX_CHUNK_COUNT, DEFAULT_MAX_CONNECTIONS_PER_PEER, DEFAULT_MAX_MESSAGE_SIZE
 from softplc.opcua.subscriptions import GuardedSubscriptionService
 

@@ -1,4 +1,4 @@
-"""asyncua's user manager over the users file (`softplc.users`): password, certificate, anonymous."""
+"""asyncua's user manager over the users file (`softplc.security.users`): password, certificate, anonymous."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ from typing import Any
 from asyncua.crypto.permission_rules import UserRole
 from asyncua.server.user_managers import UserManager
 
-from softplc.logins import PasswordLogins
+from softplc.security.logins import PasswordLogins
 from softplc.opcua.roles import SessionUser
 from softplc.core.roles import Role
-from softplc.users import UserStore
+from softplc.security.users import UserStore
 
 log = logging.getLogger(__name__)
 

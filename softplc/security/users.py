@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from softplc.passwords import SCRYPT_LOG2_N, hash_password, verify_password
+from softplc.security.passwords import SCRYPT_LOG2_N, hash_password, verify_password
 from softplc.core.roles import ROLE_NAMES, Role
 from softplc.config.yamlsource import ConfigError, load_yaml
 

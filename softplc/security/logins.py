@@ -37,11 +37,11 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from softplc.passwords import dummy_hash, verify_password
+from softplc.security.passwords import dummy_hash, verify_password
 from softplc.util.peers import PeerLog
 
 if TYPE_CHECKING:
-    from softplc.users import UserEntry, UserStore
+    from softplc.security.users import UserEntry, UserStore
 
 log = logging.getLogger(__name__)
 

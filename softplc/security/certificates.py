@@ -30,7 +30,7 @@ from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from softplc.users import fingerprint, normalise_fingerprint
+from softplc.security.users import fingerprint, normalise_fingerprint
 
 log = logging.getLogger(__name__)
 
