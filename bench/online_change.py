@@ -17,7 +17,7 @@ counts are printed, and the goal counts the others.
     .venv/bin/python bench/online_change.py                       # 40 changes
     .venv/bin/python bench/online_change.py --changes 10 --no-adapters
     .venv/bin/python bench/online_change.py --check-switch-interval 0.005    # Python's default GIL hand-over
-    .venv/bin/python bench/online_change.py --no-gate       # the check does not step aside (softplc/scan_gate.py)
+    .venv/bin/python bench/online_change.py --no-gate       # the check does not step aside (softplc/engine/scan_gate.py)
 """
 
 from __future__ import annotations

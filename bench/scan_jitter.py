@@ -45,7 +45,7 @@ from softplc.core.datatypes import DataType  # noqa: E402
 from softplc.util.durations import format_duration, parse_duration  # noqa: E402
 from softplc.util.realtime import set_realtime_priority, use_normal_priority_executor  # noqa: E402
 from softplc.runtime import Runtime  # noqa: E402
-from softplc.scan import RestartPolicy  # noqa: E402
+from softplc.engine.scan import RestartPolicy  # noqa: E402
 from softplc.core.tags import TagDef  # noqa: E402
 
 GOAL_P99_MS = 1.0

@@ -214,7 +214,7 @@ def _audit(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter
 def _history(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
     from softplc.history.section import tag_rules
     from softplc.history.settings import HistorySettings
-    from softplc.systags import runtime_tag_definitions
+    from softplc.engine.systags import runtime_tag_definitions
 
     rules = tag_rules(config)
     if not HistorySettings.configured(config) and not rules:

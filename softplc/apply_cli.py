@@ -3,7 +3,7 @@
 It logs in over OPC UA as an engineer, with the options every client command shares
 (softplc/opcua/login.py), and calls the runtime's `programs.apply` command through the server's
 door to the commands (softplc/opcua/door_client.py). The runtime re-reads the file it was
-started with and checks it (softplc/online_change.py); this command prints what it answers.
+started with and checks it (softplc/engine/online_change/change.py); this command prints what it answers.
 `--config` (the plant's configuration, default tagdb.yaml here) only says where the plant serves.
 
     softplc apply --user erin                     # password from a prompt, $SOFTPLC_PASSWORD or --password-stdin

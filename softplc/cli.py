@@ -31,7 +31,7 @@ from softplc.config.sections import editor_schema
 from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
-    from softplc.retain import RetainError
+    from softplc.engine.retain import RetainError
 
 EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
 EXIT_RETAIN_CORRUPT = 3  # `softplc run`: retain.sqlite is corrupt; nothing started until the user chooses
@@ -188,7 +188,7 @@ def cmd_schema(args: argparse.Namespace) -> int:
 
 
 def cmd_tags(args: argparse.Namespace) -> int:
-    from softplc.systags import runtime_tag_definitions
+    from softplc.engine.systags import runtime_tag_definitions
 
     config = load_config(args.config)
     definitions = list(config.tags)
@@ -227,7 +227,7 @@ def cmd_tags(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from softplc.adapters import build_adapters
-    from softplc.retain import RetainError
+    from softplc.engine.retain import RetainError
     from softplc.runtime import AdapterError, Runtime
     from softplc.stop_signals import StopSignals
     from softplc.stop_signals import describe as describe_signal
@@ -239,7 +239,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     until = None
     runtime_probe_names = [d.name for d in config.tags]
     if args.until:
-        from softplc.systags import runtime_tag_definitions
+        from softplc.engine.systags import runtime_tag_definitions
 
         try:
             until = Condition(args.until, runtime_probe_names + [d.name for d in runtime_tag_definitions(config)])

@@ -24,14 +24,14 @@ from softplc.config import PlantConfig
 from softplc.util.durations import parse_duration
 from softplc.core.events import EventBus
 from softplc.core.expression import Condition
-from softplc.online_change import OnlineChange
+from softplc.engine.online_change.change import OnlineChange
 from softplc.core.program import ProgramContext
-from softplc.program_control import register_program_commands
-from softplc.retain import RetainStore, open_retained
-from softplc.runtime_commands import register_runtime_commands
-from softplc.scan import ProgramInstance, ProgramState, ScanEngine, Task
-from softplc.stall import StallDetector
-from softplc.systags import SystemTags, runtime_tag_definitions
+from softplc.engine.program_control import register_program_commands
+from softplc.engine.retain import RetainStore, open_retained
+from softplc.engine.runtime_commands import register_runtime_commands
+from softplc.engine.scan import ProgramInstance, ProgramState, ScanEngine, Task
+from softplc.engine.stall import StallDetector
+from softplc.engine.systags import SystemTags, runtime_tag_definitions
 from softplc.core.tagdb import TagDatabase, WriteRejected
 from softplc.config.yamlsource import ConfigError, Location, Problem
 

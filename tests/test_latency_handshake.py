@@ -11,7 +11,7 @@ import pytest
 from softplc.core.clock import SimClock
 from softplc.config import PlantConfig, load_config
 from softplc.runtime import Runtime
-from softplc.scan import ProgramState
+from softplc.engine.scan import ProgramState
 
 from conftest import REPO
 

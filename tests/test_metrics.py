@@ -29,7 +29,7 @@ from softplc.metrics.adapter import MetricsAdapter
 from softplc.metrics.histograms import SeriesHistogram
 from softplc.metrics.settings import MetricsSettings
 from softplc.runtime import Runtime
-from softplc.stats import TimingSeries
+from softplc.engine.stats import TimingSeries
 
 REPO = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.asyncio(loop_scope="module")

@@ -14,7 +14,7 @@ import pytest
 from softplc.core.clock import Clock, SimClock
 from softplc.core.commands import CommandRefused
 from softplc.config import load_config
-from softplc.online_change import ChangeRefused
+from softplc.engine.online_change.change import ChangeRefused
 from softplc.core.roles import Role
 from softplc.runtime import Runtime
 from softplc.core.tagdb import Origin

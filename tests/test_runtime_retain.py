@@ -14,7 +14,7 @@ import pytest
 
 from softplc.cli import main
 from softplc.core.clock import SimClock
-from softplc.retain import RetainError, RetainStore
+from softplc.engine.retain import RetainError, RetainStore
 from softplc.runtime import Runtime
 
 RETAIN = """

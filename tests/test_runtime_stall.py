@@ -183,7 +183,7 @@ class StallLog(logging.Handler):
 @pytest.fixture
 def stall_log() -> Iterator[Callable[[Runtime], StallLog]]:
     handlers: list[StallLog] = []
-    logger = logging.getLogger("softplc.stall")
+    logger = logging.getLogger("softplc.engine.stall")
 
     def attach(runtime: Runtime) -> StallLog:
         handler = StallLog(runtime)

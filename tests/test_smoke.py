@@ -4,7 +4,7 @@ from softplc.core.clock import SimClock
 from softplc.config import load_config
 from softplc.core.expression import Condition
 from softplc.runtime import Runtime
-from softplc.scan import ProgramState
+from softplc.engine.scan import ProgramState
 
 from conftest import REPO
 

@@ -26,7 +26,7 @@ from softplc.audit.store import SINK_NAME, AuditSink
 from softplc.core.clock import Clock
 from softplc.core.commands import CommandCall, Commands
 from softplc.util.realtime import shorten_switch_interval
-from softplc.scan_gate import ScanGate
+from softplc.engine.scan_gate import ScanGate
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.core.tagdb import TagDatabase, WriteEvent
 
@@ -74,7 +74,7 @@ class AuditRecorder:
                 raise AdapterError(f"audit: cannot open SQLite {storage.path}: {error}") from None
         self.database = database = Database(storage)
         writer = BatchWriter(database, name="softplc-audit-writer", max_pending=MAX_PENDING)
-        # On the real clock the writer steps aside while a scan cycle is due (softplc/scan_gate.py).
+        # On the real clock the writer steps aside while a scan cycle is due (softplc/engine/scan_gate.py).
         self.gate = gate = ScanGate(runtime.engine, runtime.clock) if not simulated and runtime.tasks else None
         self._sink = AuditSink(self.plant, partition=self.settings.partition, retention=self.settings.retention, now=runtime.clock.wall,
                                steps=gate.stepping if gate is not None else None)

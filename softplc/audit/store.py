@@ -45,7 +45,7 @@ class AuditSink:
         self.partition = partition
         self.retention = retention
         self._now = now  # the runtime clock's wall time: retention counts back from it (simulated under --sim)
-        # `steps()` yields a step() to call between chunks of rows: a ScanGate's (softplc/scan_gate.py) waits
+        # `steps()` yields a step() to call between chunks of rows: a ScanGate's (softplc/engine/scan_gate.py) waits
         # there while a scan cycle is due, so the rows and the SQL never hold the interpreter lock when one starts.
         self._steps = steps or _no_steps
         self.stepping = steps is not None  # cleared when the scan stops: no cycle would come to wait for

@@ -152,7 +152,7 @@ def import_program(reference: str, base_dir: Path, load_module: ModuleLoader | N
 
     `base_dir` (the configuration's folder) is importable, so `programs.x:Y` finds the
     plant's own `programs/` folder. `load_module(name, base_dir)` loads the module (default: the
-    usual import, from the module cache; an online change loads fresh ones, `softplc.config.fresh`).
+    usual import, from the module cache; an online change loads fresh ones, `softplc.engine.online_change.fresh`).
     """
     module_name, class_name = split_reference(reference)
     try:

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 # They are imported whenever a configuration is loaded, so they must not import asyncua,
 # pymodbus, numpy and the like at module level (tests/test_config_sections.py checks it).
 SECTION_MODULES: tuple[str, ...] = (
-    "softplc.runtime_section",
+    "softplc.engine.section",
     "softplc.opcua.section",
     "softplc.modbus.section",
     "softplc.fleet.section",

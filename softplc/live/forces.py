@@ -1,7 +1,7 @@
 """`softplc forces | force | unforce`: forcing a running softplc over OPC UA.
 
 They call the runtime's commands (`tags.forces`, `tags.force`, `tags.unforce` in
-softplc/runtime_commands.py) through the server's door to them, `Objects/Commands`
+softplc/engine/runtime_commands.py) through the server's door to them, `Objects/Commands`
 (`Call(name, argumentsJSON) -> resultJSON`; client side softplc/opcua/door_client.py), which checks the
 session's role like every other path: listing is for any role, forcing for engineers.
 

@@ -19,11 +19,11 @@ from softplc import __version__
 from softplc.metrics.catalog import figure_of
 from softplc.metrics.counters import CommandCounts, WriteCounts
 from softplc.metrics.histograms import LATENCY_BUCKETS, SCAN_BUCKETS, SeriesHistogram, cycle_buckets
-from softplc.program_instance import ProgramState
+from softplc.engine.program_instance import ProgramState
 
 if TYPE_CHECKING:
     from softplc.runtime import Runtime
-    from softplc.scan import Task
+    from softplc.engine.scan import Task
 
 log = logging.getLogger(__name__)
 

@@ -22,7 +22,7 @@ from types import FrameType
 from typing import Any
 
 from softplc.core.clock import Clock
-from softplc.scan import ScanEngine, Task
+from softplc.engine.scan import ScanEngine, Task
 
 MARGIN = 0.002  # at least this long before a release the worker steps aside
 LONGEST_WAIT = 0.05  # a cycle that does not come (the engine stopping) never holds the worker longer

@@ -20,8 +20,8 @@ from typing import Any, Protocol
 from softplc.core.clock import Clock
 from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.core.origin import Origin
-from softplc.program_instance import ProgramInstance, ProgramState
-from softplc.scan import Task
+from softplc.engine.program_instance import ProgramInstance, ProgramState
+from softplc.engine.scan import Task
 from softplc.util.suggest import did_you_mean
 
 

@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from softplc.core.clock import Clock
-from softplc.program_instance import NEVER, ProgramInstance, ProgramState, RestartPolicy
-from softplc.stats import TimingSeries
+from softplc.engine.program_instance import NEVER, ProgramInstance, ProgramState, RestartPolicy
+from softplc.engine.stats import TimingSeries
 from softplc.core.tagdb import TagDatabase
 
 __all__ = ["NEVER", "CurrentScan", "ProgramInstance", "ProgramState", "RestartPolicy", "ScanEngine", "Task", "TaskStats"]

@@ -16,7 +16,7 @@ import time
 import traceback
 from collections.abc import Callable
 
-from softplc.scan import ScanEngine, Task
+from softplc.engine.scan import ScanEngine, Task
 
 log = logging.getLogger(__name__)
 

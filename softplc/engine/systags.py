@@ -12,7 +12,7 @@ from typing import Any
 
 from softplc.config.plant import SYSTEM_PREFIX, PlantConfig, TaskConfig
 from softplc.core.datatypes import DataType
-from softplc.scan import ScanEngine
+from softplc.engine.scan import ScanEngine
 from softplc.core.tagdb import TagDatabase
 from softplc.core.tags import Access, TagDef
 

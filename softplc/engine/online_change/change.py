@@ -2,10 +2,10 @@
 
 `programs.apply` (engineer; `softplc apply`, the HMI's button, any adapter) re-reads the file the
 runtime was started with and checks it exactly as `softplc check` does, with every program
-module compiled fresh from its source (`softplc/config/fresh.py`). Off the scan path (a worker
+module compiled fresh from its source (`softplc/engine/online_change/fresh.py`). Off the scan path (a worker
 thread on the real clock) it also creates and sets up (`setup()`, warm) the new version of every
 changed program. If anything is wrong — a located problem in the file or a program, a setup()
-that raises, a change that needs a restart (`softplc/online_diff.py`) — nothing is applied and
+that raises, a change that needs a restart (`softplc/engine/online_change/diff.py`) — nothing is applied and
 the command is refused with the problems and the differences. Otherwise, between two cycles
 (commands run on the event loop, which also runs the scan), each new version takes over the
 state of the old one (`Program.carry_over`), and each task's program list is replaced: pointer
@@ -23,25 +23,25 @@ from typing import Any, Protocol
 
 from softplc.core.clock import Clock, wait_for
 from softplc.core.commands import CommandRefused, Commands, Permission
-from softplc.config.fresh import FreshModules, module_file, source_digest
+from softplc.engine.online_change.fresh import FreshModules, module_file, source_digest
 from softplc.config.loader import load_config
 from softplc.config.plant import PlantConfig
 from softplc.config.programs import raised_at, split_reference
 from softplc.core.function_blocks import warm_start
-from softplc.online_diff import ConfigDiff, diff_configs
+from softplc.engine.online_change.diff import ConfigDiff, diff_configs
 from softplc.core.origin import Origin
 from softplc.core.program import Program, ProgramContext
-from softplc.program_instance import ProgramInstance, ProgramState
+from softplc.engine.program_instance import ProgramInstance, ProgramState
 from softplc.util.realtime import shorten_switch_interval
-from softplc.scan import ScanEngine, Task
-from softplc.scan_gate import ScanGate
+from softplc.engine.scan import ScanEngine, Task
+from softplc.engine.scan_gate import ScanGate
 from softplc.config.yamlsource import ConfigError
 
 log = logging.getLogger(__name__)
 
 # While the check runs in its thread, the scan's thread must get the interpreter lock back
 # quickly when a cycle is due: the switch interval is shortened (softplc/util/realtime.py, as for the
-# stores' writer threads) and the check steps aside whenever a cycle is due (softplc/scan_gate.py). bench/online_change.py
+# stores' writer threads) and the check steps aside whenever a cycle is due (softplc/engine/scan_gate.py). bench/online_change.py
 # --no-gate shows why: without it the 10 ms task's median start latency grows from ~0.01 to ~1-2.5 ms.
 USE_SCAN_GATE = True
 CHECK_TIMEOUT = 60.0  # a new version's setup() that never returns: the engineer is told, not left waiting

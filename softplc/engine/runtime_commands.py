@@ -15,7 +15,7 @@ from typing import Any, Protocol
 
 from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.core.datatypes import TypeMismatch
-from softplc.scan import ProgramState, Task
+from softplc.engine.scan import ProgramState, Task
 from softplc.core.tagdb import Origin, TagDatabase, WriteRejected
 
 
