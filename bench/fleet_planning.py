@@ -5,7 +5,7 @@ for a TurtleBot (radius 0.18 m) and the thesis's largest robot (500 x 600 mm, ra
 on the default 0.1 m planning grid and on a 0.05 m grid. Goal: the median plan on the default
 grid takes under 20 ms. Plans may take longer (a long way round the partitions), so they never
 run on the event loop: in real time the runtime sends them to a worker process
-(softplc/fleet/planning.py).
+(softplc/robotics/planning.py).
 
 Event-loop stall: on the real clock, every pair is planned back to back, once in an executor
 thread (clock.run_blocking: the GIL is shared with the loop) and once in the planning worker
@@ -38,11 +38,11 @@ sys.path.insert(0, str(REPO))
 from softplc.core.clock import RealClock, SimClock  # noqa: E402
 from softplc.config import load_config  # noqa: E402
 from softplc.fleet.adapter import FleetAdapter  # noqa: E402
-from softplc.fleet.driver import PlanRequest  # noqa: E402
-from softplc.fleet.floor import Floor  # noqa: E402
-from softplc.fleet.gridmap import load_map  # noqa: E402
-from softplc.fleet.planning import ClockPlanning, ProcessPlanning  # noqa: E402
-from softplc.fleet.robots import load_robots  # noqa: E402
+from softplc.robotics.driver import PlanRequest  # noqa: E402
+from softplc.robotics.floor import Floor  # noqa: E402
+from softplc.robotics.gridmap import load_map  # noqa: E402
+from softplc.robotics.planning import ClockPlanning, ProcessPlanning  # noqa: E402
+from softplc.robotics.robots import load_robots  # noqa: E402
 from softplc.runtime import Runtime  # noqa: E402
 
 FACTORY = REPO / "robots" / "maps" / "factory.yaml"

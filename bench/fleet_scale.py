@@ -32,8 +32,8 @@ sys.path.insert(0, str(REPO))
 from softplc.core.clock import RealClock  # noqa: E402
 from softplc.config import load_config  # noqa: E402
 from softplc.fleet.adapter import FleetAdapter  # noqa: E402
-from softplc.fleet.gridmap import OccupancyGrid  # noqa: E402
-from softplc.fleet.robots import load_robots  # noqa: E402
+from softplc.robotics.gridmap import OccupancyGrid  # noqa: E402
+from softplc.robotics.robots import load_robots  # noqa: E402
 from softplc.runtime import Runtime  # noqa: E402
 
 GOAL_ROBOTS = 100

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from softplc.fleet.compat import Compatibility
-from softplc.fleet.robots import load_tasks
+from softplc.robotics.compat import Compatibility
+from softplc.robotics.robots import load_tasks
 
 PROJECT = Path(__file__).resolve().parent.parent
 

@@ -10,7 +10,7 @@
 
 It sets `status` (busy) with every new goal; the robot itself clears `status` when it arrives.
 A robot has arrived when it has cleared `status` within 0.5 m of its goal: one rule, shared with
-the robot's driver (softplc/fleet/arrival.py). The thesis's robMotion waited for 0.3 m while its
+the robot's driver (softplc/robotics/arrival.py). The thesis's robMotion waited for 0.3 m while its
 robots stopped at 0.5 m; two robots sent to one station then stood still for good. A robot
 that cleared `status` farther out gave up on the trip (its navigation failed): after
 `retry_after` seconds the sequencer asks it again (status busy, same goal). Task coordinates
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from programs.bindings import check_lengths
 from softplc import TON, InOut, Input, Output, Param, Program
-from softplc.fleet.arrival import has_arrived, has_given_up, within_goal
+from softplc.robotics.arrival import has_arrived, has_given_up, within_goal
 
 WAITING, TO_SOURCE, AT_SOURCE, TO_DESTINATION, AT_DESTINATION = range(5)
 

@@ -11,7 +11,7 @@ from typing import Any
 from softplc.core.clock import Clock, SimClock
 from softplc.config import load_config
 from softplc.fleet.adapter import FleetAdapter
-from softplc.fleet.gridmap import OccupancyGrid
+from softplc.robotics.gridmap import OccupancyGrid
 from softplc.runtime import Runtime
 
 ROBOT_TEMPLATE = """\
@@ -70,7 +70,7 @@ class Plant:
     def __init__(self, tagdb: Path, grid: OccupancyGrid, clock: Clock | None = None, **options: Any) -> None:
         self.config = load_config(tagdb)
         self.runtime = Runtime(self.config, clock or SimClock(), state_dir=tagdb.parent / "state")
-        from softplc.fleet.robots import load_robots
+        from softplc.robotics.robots import load_robots
 
         self.fleet = FleetAdapter(load_robots(tagdb.parent / "robots.yaml"), grid, record=True, **options)
         self.runtime.add_adapter(self.fleet)

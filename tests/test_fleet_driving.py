@@ -11,8 +11,8 @@ import pytest
 from softplc.core.clock import SimClock
 from softplc.config import load_config
 from softplc.fleet.adapter import FleetAdapter
-from softplc.fleet.gridmap import OccupancyGrid, load_map
-from softplc.fleet.loop import Sample
+from softplc.robotics.gridmap import OccupancyGrid, load_map
+from softplc.robotics.loop import Sample
 from softplc.runtime import AdapterError, Runtime
 
 from conftest import REPO

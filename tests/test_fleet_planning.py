@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from softplc.fleet.floor import Floor
-from softplc.fleet.gridmap import OccupancyGrid, grid_from_text, load_map, read_pgm
-from softplc.fleet.planner import Corridor, Disc, PathPlanner
+from softplc.robotics.floor import Floor
+from softplc.robotics.gridmap import OccupancyGrid, grid_from_text, load_map, read_pgm
+from softplc.robotics.planner import Corridor, Disc, PathPlanner
 from softplc.config.yamlsource import ConfigError
 
 from conftest import REPO

@@ -14,11 +14,11 @@ from pathlib import Path
 import pytest
 
 from softplc.core.clock import RealClock, SimClock
-from softplc.fleet.driver import PlanRequest, run_plan
-from softplc.fleet.floor import Floor
-from softplc.fleet.gridmap import load_map
-from softplc.fleet.planner import Disc, Plan
-from softplc.fleet.planning import ClockPlanning, ProcessPlanning
+from softplc.robotics.driver import PlanRequest, run_plan
+from softplc.robotics.floor import Floor
+from softplc.robotics.gridmap import load_map
+from softplc.robotics.planner import Disc, Plan
+from softplc.robotics.planning import ClockPlanning, ProcessPlanning
 
 from conftest import REPO
 from fleet_support import Plant, robot_yaml, write_plant
@@ -125,10 +125,10 @@ def test_a_script_without_a_main_guard_gets_its_worker(tmp_path: Path) -> None:
     script = tmp_path / "embed.py"
     script.write_text(textwrap.dedent(f"""\
         import asyncio
-        from softplc.fleet.floor import Floor
-        from softplc.fleet.gridmap import load_map
-        from softplc.fleet.driver import PlanRequest
-        from softplc.fleet.planning import ClockPlanning, ProcessPlanning
+        from softplc.robotics.floor import Floor
+        from softplc.robotics.gridmap import load_map
+        from softplc.robotics.driver import PlanRequest
+        from softplc.robotics.planning import ClockPlanning, ProcessPlanning
         from softplc.core.clock import RealClock
 
         print("script body ran", flush=True)  # once, by this process only

@@ -19,8 +19,8 @@ import pytest
 from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.fleet.adapter import FleetAdapter
-from softplc.fleet.gridmap import load_map
-from softplc.fleet.robots import load_robots
+from softplc.robotics.gridmap import load_map
+from softplc.robotics.robots import load_robots
 from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.runtime import Runtime
 from softplc.core.tags import Quality

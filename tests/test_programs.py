@@ -11,7 +11,7 @@ from programs.motion_sequencer import MotionSequencer
 from programs.optimal_dispatcher import OptimalAssignment
 from programs.task_weighting import TaskWeighting, lowest_weight, task_weight
 from softplc.core.clock import SimClock
-from softplc.fleet.arrival import GOAL_TOLERANCE
+from softplc.robotics.arrival import GOAL_TOLERANCE
 from softplc.core.program import Program, ProgramContext
 
 

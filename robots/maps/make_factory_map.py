@@ -30,7 +30,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent.parent))
 
-from softplc.fleet.gridmap import OccupancyGrid  # noqa: E402
+from softplc.robotics.gridmap import OccupancyGrid  # noqa: E402
 
 WIDTH_M, HEIGHT_M, RESOLUTION = 21.95, 8.6, 0.025
 WALL = 0.1

@@ -38,7 +38,7 @@ from softplc.util.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.fleet.adapter import FleetAdapter
-    from softplc.fleet.compat import (
+    from softplc.robotics.compat import (
         Compatibility,
         compatibility_matrix,
         compatible,
@@ -46,29 +46,29 @@ if TYPE_CHECKING:
         compatible_tasks,
         incompatibilities,
     )
-    from softplc.fleet.controller import SpeedLimits
-    from softplc.fleet.driver import DriverSettings, NavState, RobotDriver
-    from softplc.fleet.floor import Floor
-    from softplc.fleet.gridmap import OccupancyGrid, load_map
-    from softplc.fleet.loop import Sample
-    from softplc.fleet.planner import PathPlanner, Plan
-    from softplc.fleet.robots import Hardware, Pose, RobotFile, RobotSpec, TaskFile, TaskSpec, load_robots, load_tasks
+    from softplc.robotics.controller import SpeedLimits
+    from softplc.robotics.driver import DriverSettings, NavState, RobotDriver
+    from softplc.robotics.floor import Floor
+    from softplc.robotics.gridmap import OccupancyGrid, load_map
+    from softplc.robotics.loop import Sample
+    from softplc.robotics.planner import PathPlanner, Plan
+    from softplc.robotics.robots import Hardware, Pose, RobotFile, RobotSpec, TaskFile, TaskSpec, load_robots, load_tasks
     from softplc.fleet.settings import FleetSettings
 
 # Public names and their modules, imported on first use (PEP 562): `softplc --help` imports
 # softplc.fleet.cli and must not load numpy, scipy and the planner with it.
 _MODULES = {
     "softplc.fleet.adapter": ("FleetAdapter",),
-    "softplc.fleet.compat": (
+    "softplc.robotics.compat": (
         "Compatibility", "compatibility_matrix", "compatible", "compatible_robots", "compatible_tasks", "incompatibilities",
     ),
-    "softplc.fleet.controller": ("SpeedLimits",),
-    "softplc.fleet.driver": ("DriverSettings", "NavState", "RobotDriver"),
-    "softplc.fleet.floor": ("Floor",),
-    "softplc.fleet.gridmap": ("OccupancyGrid", "load_map"),
-    "softplc.fleet.loop": ("Sample",),
-    "softplc.fleet.planner": ("PathPlanner", "Plan"),
-    "softplc.fleet.robots": ("Hardware", "Pose", "RobotFile", "RobotSpec", "TaskFile", "TaskSpec", "load_robots", "load_tasks"),
+    "softplc.robotics.controller": ("SpeedLimits",),
+    "softplc.robotics.driver": ("DriverSettings", "NavState", "RobotDriver"),
+    "softplc.robotics.floor": ("Floor",),
+    "softplc.robotics.gridmap": ("OccupancyGrid", "load_map"),
+    "softplc.robotics.loop": ("Sample",),
+    "softplc.robotics.planner": ("PathPlanner", "Plan"),
+    "softplc.robotics.robots": ("Hardware", "Pose", "RobotFile", "RobotSpec", "TaskFile", "TaskSpec", "load_robots", "load_tasks"),
     "softplc.fleet.settings": ("FleetSettings",),
 }
 __getattr__, __dir__ = lazy_exports(__name__, _MODULES)

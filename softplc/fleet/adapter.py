@@ -16,16 +16,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from softplc.config import PlantConfig
-from softplc.fleet.controller import SpeedLimits
-from softplc.fleet.driver import Command, DriverSettings, Report, RobotDriver
-from softplc.fleet.floor import Floor
-from softplc.fleet.gridmap import OccupancyGrid, load_map
-from softplc.fleet.loop import ControlLoop, LoopStats, Sample
-from softplc.fleet.peers import PEER_TAGS, PeerView
-from softplc.fleet.planner import PathPlanner
-from softplc.fleet.planning import ClockPlanning, Planning, ProcessPlanning
+from softplc.robotics.controller import SpeedLimits
+from softplc.robotics.driver import Command, DriverSettings, Report, RobotDriver
+from softplc.robotics.floor import Floor
+from softplc.robotics.gridmap import OccupancyGrid, load_map
+from softplc.robotics.loop import ControlLoop, LoopStats, Sample
+from softplc.robotics.peers import PEER_TAGS, PeerView
+from softplc.robotics.planner import PathPlanner
+from softplc.robotics.planning import ClockPlanning, Planning, ProcessPlanning
 from softplc.fleet.remote import PUBLISHED_TAGS, AgentRefusal, RemoteLink
-from softplc.fleet.robots import DriverKind, Pose, RobotFile, RobotSpec, load_robots
+from softplc.robotics.robots import DriverKind, Pose, RobotFile, RobotSpec, load_robots
 from softplc.fleet.settings import FleetSettings
 from softplc.core.tagdb import Origin, TagDatabase
 from softplc.core.tags import Quality, Tag

@@ -30,13 +30,13 @@ from asyncua import Client, ua
 
 from softplc import __version__
 from softplc.core.clock import Clock, RealClock
-from softplc.fleet.controller import SpeedLimits
-from softplc.fleet.driver import Command, DriverSettings, Report, RobotDriver
-from softplc.fleet.floor import Floor
-from softplc.fleet.loop import ControlLoop
-from softplc.fleet.peers import PEER_TAGS, PeerView
-from softplc.fleet.protocol import Answer, Registration, encode_report
-from softplc.fleet.robots import RobotFile, unknown_id_message
+from softplc.robotics.controller import SpeedLimits
+from softplc.robotics.driver import Command, DriverSettings, Report, RobotDriver
+from softplc.robotics.floor import Floor
+from softplc.robotics.loop import ControlLoop
+from softplc.robotics.peers import PEER_TAGS, PeerView
+from softplc.robotics.protocol import Answer, Registration, encode_report
+from softplc.robotics.robots import RobotFile, unknown_id_message
 from softplc.opcua.login import REFUSALS
 
 log = logging.getLogger(__name__)

@@ -58,7 +58,7 @@ def add_commands(subparsers: Any) -> None:
 
 
 def cmd_compat(args: argparse.Namespace) -> int:
-    from softplc.fleet.compat import Compatibility
+    from softplc.robotics.compat import Compatibility
     from softplc.util.console import print_table
 
     compat = Compatibility.load(args.robots, args.tasks)
@@ -92,8 +92,8 @@ def cmd_compat(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from softplc.fleet.gridmap import load_map
-    from softplc.fleet.planner import PathPlanner
+    from softplc.robotics.gridmap import load_map
+    from softplc.robotics.planner import PathPlanner
 
     grid = load_map(args.map)
     planner = PathPlanner(grid, args.radius, resolution=args.resolution)
@@ -148,10 +148,10 @@ def add_agent_command(subparsers: Any) -> None:
 
 def cmd_robot_agent(args: argparse.Namespace) -> int:
     from softplc.fleet.agent import AgentError, Credentials, RobotAgent
-    from softplc.fleet.controller import SpeedLimits
-    from softplc.fleet.floor import Floor
-    from softplc.fleet.gridmap import load_map
-    from softplc.fleet.robots import load_robots, unknown_id_message
+    from softplc.robotics.controller import SpeedLimits
+    from softplc.robotics.floor import Floor
+    from softplc.robotics.gridmap import load_map
+    from softplc.robotics.robots import load_robots, unknown_id_message
 
     if (args.certificate is None) != (args.private_key is None):
         print("softplc robot-agent: --certificate and --private-key go together", file=sys.stderr)

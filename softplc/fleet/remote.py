@@ -1,7 +1,7 @@
 """The runtime's side of `softplc robot-agent`: registrations answered, reports published, heartbeats.
 
 A remote robot (`driver: remote`) has a `RemoteLink`: it accepts the agent's registration
-(answering in `rNN_agent`, see softplc.fleet.protocol), publishes each report to the robot's
+(answering in `rNN_agent`, see softplc.robotics.protocol), publishes each report to the robot's
 read-only tags and marks them BAD while the agent is silent. A robot the runtime drives itself
 (`driver: sim`) has an `AgentRefusal`: an agent that registers for it is refused with the
 reason, so a second copy of the robot never drives; the runtime logs that once a minute at most.
@@ -14,8 +14,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from softplc.fleet.protocol import Answer, Registration, decode_report
-from softplc.fleet.robots import RobotSpec
+from softplc.robotics.protocol import Answer, Registration, decode_report
+from softplc.robotics.robots import RobotSpec
 from softplc.core.tagdb import Origin, TagDatabase
 from softplc.core.tags import Quality
 

@@ -44,7 +44,7 @@ class MapImage:
 
 def render_map(yaml_path: Path) -> MapImage:
     """Draw a map_server map (already checked by the fleet's loader) as a palette PNG."""
-    from softplc.fleet.gridmap import read_pgm
+    from softplc.robotics.gridmap import read_pgm
 
     data, _ = load_yaml(yaml_path)
     pixels = read_pgm(yaml_path.parent / data["image"]).astype(np.float64) / 255.0

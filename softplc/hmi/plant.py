@@ -62,8 +62,8 @@ class PlantModel:
         return {"name": self.name, "description": self.description, "fleet": fleet, "groups": self.groups}
 
     def _load_fleet(self, config: PlantConfig, names: set[str]) -> None:
-        from softplc.fleet.compat import incompatibilities
-        from softplc.fleet.robots import load_robots, load_tasks
+        from softplc.robotics.compat import incompatibilities
+        from softplc.robotics.robots import load_robots, load_tasks
         from softplc.fleet.settings import FleetSettings
 
         if not FleetSettings.configured(config):

@@ -12,10 +12,10 @@ from typing import Any
 
 from softplc.config import PlantConfig
 from softplc.fleet.adapter import FleetAdapter
-from softplc.fleet.compat import compatible_tasks as compatible
-from softplc.fleet.floor import Floor
-from softplc.fleet.gridmap import load_map
-from softplc.fleet.robots import NO_TEAM_LIMIT, Hardware, Point, Pose, RobotFile, RobotSpec, TaskSpec
+from softplc.robotics.compat import compatible_tasks as compatible
+from softplc.robotics.floor import Floor
+from softplc.robotics.gridmap import load_map
+from softplc.robotics.robots import NO_TEAM_LIMIT, Hardware, Point, Pose, RobotFile, RobotSpec, TaskSpec
 from softplc.runtime import Adapter
 from softplc.scenarios.spec import PROJECT, RobotParams, Scenario, TaskParams
 

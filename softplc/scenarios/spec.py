@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from softplc.config import did_you_mean, schema_problems
-from softplc.fleet.robots import HARDWARE_NAMES
+from softplc.robotics.robots import HARDWARE_NAMES
 from softplc.config.schema import NAME_PATTERN
 from softplc.config.yamlsource import ConfigError, SourceMap, load_yaml
 

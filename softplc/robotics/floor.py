@@ -7,8 +7,8 @@ import threading
 
 import numpy as np
 
-from softplc.fleet.gridmap import OccupancyGrid
-from softplc.fleet.planner import PathPlanner
+from softplc.robotics.gridmap import OccupancyGrid
+from softplc.robotics.planner import PathPlanner
 
 
 class Floor:

@@ -19,7 +19,7 @@ import json
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from softplc.fleet.driver import NavState, Report
+from softplc.robotics.driver import NavState, Report
 
 
 @dataclass

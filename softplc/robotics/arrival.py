@@ -1,7 +1,7 @@
 """When a robot counts as at its goal: one rule for the robot's driver and for the programs that send it.
 
 A robot has arrived when it is within `GOAL_TOLERANCE` of its goal and has cleared `status`.
-The driver (softplc.fleet.driver) clears `status` by exactly this distance, and the motion
+The driver (softplc.robotics.driver) clears `status` by exactly this distance, and the motion
 sequencer (programs/motion_sequencer.py) accepts a robot at a station by exactly this rule, so
 a robot the driver considers there is never left waiting for a sequencer that does not.
 (The thesis used 0.5 m on the robot's side and 0.3 m in `robMotion`; two robots sent to one

@@ -7,7 +7,7 @@ needs a path it sets a request that the caller runs off the event loop (`run_pla
 back with `plan_done()`. The same class drives simulated robots in the runtime and real or
 simulated robots in a remote agent.
 
-Traffic between robots follows `softplc.fleet.traffic`: stop for parked robots and for robots
+Traffic between robots follows `softplc.robotics.traffic`: stop for parked robots and for robots
 with right of way (id sorts first), slow down for the others; a robot that stays blocked plans
 a detour — after `yield_wait` when it has to make way (moving off the other's route if need be),
 after `patience` when it has right of way. Blocked for `give_up` seconds, the trip fails.
@@ -19,13 +19,13 @@ import enum
 import math
 from dataclasses import dataclass, field
 
-from softplc.fleet.arrival import within_goal
-from softplc.fleet.controller import PurePursuit, SpeedLimits, integrate
-from softplc.fleet.floor import Floor
-from softplc.fleet.peers import Peer, PeerView, encode_route
-from softplc.fleet.planner import Corridor, Disc, PathPlanner, Plan
-from softplc.fleet.robots import Pose, RobotSpec
-from softplc.fleet.traffic import Traffic, TrafficSettings
+from softplc.robotics.arrival import within_goal
+from softplc.robotics.controller import PurePursuit, SpeedLimits, integrate
+from softplc.robotics.floor import Floor
+from softplc.robotics.peers import Peer, PeerView, encode_route
+from softplc.robotics.planner import Corridor, Disc, PathPlanner, Plan
+from softplc.robotics.robots import Pose, RobotSpec
+from softplc.robotics.traffic import Traffic, TrafficSettings
 
 
 class NavState(enum.Enum):
@@ -43,7 +43,7 @@ class NavState(enum.Enum):
 class DriverSettings:
     """Tuning of the local navigation (defaults suit the thesis TurtleBots at 0.2 m/s)."""
 
-    # Arrival (status cleared) is softplc.fleet.arrival's rule, shared with the sequencers: not a setting.
+    # Arrival (status cleared) is softplc.robotics.arrival's rule, shared with the sequencers: not a setting.
     stop_tolerance: float = 0.1  # after arriving, keeps creeping to within this of the goal
     yield_wait: float = 1.0  # s stopped before making way for a robot with right of way
     patience: float = 6.0  # s stopped before detouring around a robot we have right of way over

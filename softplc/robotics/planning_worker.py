@@ -1,4 +1,4 @@
-"""The planning worker process: `python -m softplc.fleet.planning_worker`, started by `ProcessPlanning`.
+"""The planning worker process: `python -m softplc.robotics.planning_worker`, started by `ProcessPlanning`.
 
 It reads frames from stdin and answers on stdout, one at a time, in order. A frame is a 4-byte
 big-endian length and a pickle of `(kind, ident, body)`:
@@ -23,9 +23,9 @@ import pickle  # noqa: E402
 import sys  # noqa: E402
 from typing import Any, BinaryIO  # noqa: E402
 
-from softplc.fleet.driver import PlanRequest, run_plan  # noqa: E402
-from softplc.fleet.planner import PathPlanner  # noqa: E402
-from softplc.fleet.planning import HEADER, frame  # noqa: E402
+from softplc.robotics.driver import PlanRequest, run_plan  # noqa: E402
+from softplc.robotics.planner import PathPlanner  # noqa: E402
+from softplc.robotics.planning import HEADER, frame  # noqa: E402
 
 
 def read_frame(stream: BinaryIO) -> Any | None:

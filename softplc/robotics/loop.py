@@ -3,7 +3,7 @@
 Cycles are released on absolute deadlines (`start + k * cycle`); a cycle that ends after its
 next release skips the missed ones and counts them as overruns, like a PLC task. Planning runs
 through a `Planning` (a worker process in real time, inline on the simulated clock; see
-`softplc.fleet.planning`) while the loop keeps cycling, so a 40 ms A* never stalls the robot
+`softplc.robotics.planning`) while the loop keeps cycling, so a 40 ms A* never stalls the robot
 or the event loop.
 """
 
@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from softplc.core.clock import Clock
-from softplc.fleet.driver import Command, PlanRequest, Report, RobotDriver
-from softplc.fleet.peers import PeerView
-from softplc.fleet.planner import Plan
-from softplc.fleet.planning import ClockPlanning, Planning
+from softplc.robotics.driver import Command, PlanRequest, Report, RobotDriver
+from softplc.robotics.peers import PeerView
+from softplc.robotics.planner import Plan
+from softplc.robotics.planning import ClockPlanning, Planning
 
 log = logging.getLogger(__name__)
 

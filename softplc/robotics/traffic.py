@@ -18,10 +18,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from softplc.fleet.controller import integrate
-from softplc.fleet.peers import Peer, PeerView
-from softplc.fleet.planner import Corridor, Disc
-from softplc.fleet.robots import Pose
+from softplc.robotics.controller import integrate
+from softplc.robotics.peers import Peer, PeerView
+from softplc.robotics.planner import Corridor, Disc
+from softplc.robotics.robots import Pose
 
 
 @dataclass(frozen=True)

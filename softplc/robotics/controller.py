@@ -11,7 +11,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from softplc.fleet.robots import Pose
+from softplc.robotics.robots import Pose
 
 
 @dataclass(frozen=True)

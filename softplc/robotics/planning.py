@@ -7,7 +7,7 @@ robot planned (`bench/scan_jitter.py`). A worker process has an interpreter of i
 scan never waits for a plan. The planners (the inflated maps) are sent to the worker once, as
 its first request; each plan request carries only its start, goal and temporary obstacles.
 
-The worker is a plain subprocess (`python -m softplc.fleet.planning_worker`) speaking framed
+The worker is a plain subprocess (`python -m softplc.robotics.planning_worker`) speaking framed
 pickles over its stdin and stdout, not a multiprocessing pool: that would re-import the
 program that embeds softplc (its `__main__`) in the worker, and fail for a script without an
 `if __name__ == "__main__":` guard.
@@ -30,8 +30,8 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from softplc.core.clock import Clock
-from softplc.fleet.driver import PlanRequest, run_plan
-from softplc.fleet.planner import PathPlanner, Plan
+from softplc.robotics.driver import PlanRequest, run_plan
+from softplc.robotics.planner import PathPlanner, Plan
 
 log = logging.getLogger(__name__)
 
@@ -97,7 +97,7 @@ class _Worker:
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
         with _sigint_blocked():
             process = await asyncio.create_subprocess_exec(
-                sys.executable, "-m", "softplc.fleet.planning_worker",
+                sys.executable, "-m", "softplc.robotics.planning_worker",
                 stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE, env=env,
             )
         return cls(process)

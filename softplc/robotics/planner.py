@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-from softplc.fleet.gridmap import OccupancyGrid
+from softplc.robotics.gridmap import OccupancyGrid
 
 SQRT2 = math.sqrt(2.0)
 
