@@ -39,8 +39,8 @@ DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules that add subcommands (each defines add_commands(subparsers)).
 COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.commands", "softplc.scenarios.commands", "softplc.latency.command", "softplc.opcua.cli", "softplc.fleet.cli",
-                                   "softplc.history.export", "softplc.alarms.cli", "softplc.live.commands", "softplc.apply_cli",
-                                   "softplc.audit.cli")
+                                   "softplc.history.export", "softplc.clients.alarms.cli", "softplc.clients.tags.cli", "softplc.clients.apply.cli",
+                                   "softplc.clients.audit.cli")
 
 log = logging.getLogger("softplc")
 

@@ -16,7 +16,7 @@ from softplc import InOut, Input, Output, Program
 from softplc.core.clock import Clock, RealClock
 from softplc.config import load_config
 from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
-from softplc.opcua.client import ClientCertificate, ensure_client_certificate, pem_certificate
+from softplc.protocols.opcua_client import ClientCertificate, ensure_client_certificate, pem_certificate
 from softplc.opcua.history import HistoryProvider
 from softplc.runtime import Runtime
 

@@ -78,12 +78,12 @@ def test_check_imports_what_the_adapters_need_and_no_more() -> None:
     (run,) = run_softplc(["check", "tagdb.yaml"])
     assert run["exit"] == 0
     modules = set(run["modules"])
-    for unneeded in ("sklearn", "matplotlib", "softplc.scenarios.runner", "softplc.latency.measurement", "softplc.fleet.agent"):
+    for unneeded in ("sklearn", "matplotlib", "softplc.scenarios.runner", "softplc.latency.measurement", "softplc.clients.robot_agent.agent"):
         assert unneeded not in modules
 
 
 def test_choices_copied_for_a_light_parser_match_their_source() -> None:
-    from softplc.fleet import agent
+    from softplc.clients.robot_agent import agent
     from softplc.fleet import cli as fleet_cli
     from softplc.opcua import cli as opcua_cli
     from softplc.core import roles

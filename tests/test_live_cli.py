@@ -20,7 +20,7 @@ import pytest
 
 from softplc.core.datatypes import TypeMismatch
 from softplc.opcua import OpcUaServer, Pki
-from softplc.opcua.client import ensure_client_certificate
+from softplc.protocols.opcua_client import ensure_client_certificate
 from softplc.core.roles import Role
 from softplc.runtime import Runtime
 from softplc.core.tagdb import Origin, Rule, WriteRejected

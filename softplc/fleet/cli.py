@@ -20,7 +20,7 @@ from softplc.fleet.settings import DEFAULT_MAP, DEFAULT_ROBOTS, DEFAULT_TASKS
 
 EXIT_OK, EXIT_FAILURE = 0, 1
 PASSWORD_ENV = "SOFTPLC_PASSWORD"
-AGENT_NAMESPACE = "urn:softplc:tags"  # = softplc.fleet.agent.DEFAULT_NAMESPACE, which needs asyncua (a test keeps them equal)
+AGENT_NAMESPACE = "urn:softplc:tags"  # = softplc.clients.robot_agent.agent.DEFAULT_NAMESPACE, which needs asyncua (a test keeps them equal)
 
 
 def add_commands(subparsers: Any) -> None:
@@ -147,7 +147,7 @@ def add_agent_command(subparsers: Any) -> None:
 
 
 def cmd_robot_agent(args: argparse.Namespace) -> int:
-    from softplc.fleet.agent import AgentError, Credentials, RobotAgent
+    from softplc.clients.robot_agent.agent import AgentError, Credentials, RobotAgent
     from softplc.robotics.controller import SpeedLimits
     from softplc.robotics.floor import Floor
     from softplc.robotics.gridmap import load_map

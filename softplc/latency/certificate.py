@@ -15,9 +15,9 @@ from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-# --security MODE[,CERT,KEY] is every client command's (softplc/opcua/login.py): the same here.
-from softplc.opcua.login import Security
-from softplc.opcua.login import application_uri as _application_uri
+# --security MODE[,CERT,KEY] is every client command's (softplc/clients/login.py): the same here.
+from softplc.clients.login import Security
+from softplc.clients.login import application_uri as _application_uri
 
 MODES = {"None": ua.MessageSecurityMode.None_, "Sign": ua.MessageSecurityMode.Sign,
          "SignAndEncrypt": ua.MessageSecurityMode.SignAndEncrypt}

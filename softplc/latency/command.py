@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from softplc.latency.plant import SCENARIO_NAMES, PlantMissing, scenario_durations
-from softplc.opcua.login import LoginError, add_login_arguments, read_password
+from softplc.clients.login import LoginError, add_login_arguments, read_password
 
 if TYPE_CHECKING:
     from softplc.latency.results import Measurement

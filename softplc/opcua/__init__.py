@@ -6,25 +6,25 @@ from softplc.util.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.opcua.address_space import tag_node_id
-    from softplc.opcua.client import ClientCertificate, ensure_client_certificate, make_client
+    from softplc.protocols.opcua_client import ClientCertificate, ensure_client_certificate, make_client
     from softplc.core.roles import Role
     from softplc.security.certificates import Pki
     from softplc.opcua.server import OpcUaServer
     from softplc.opcua.settings import DEFAULT_NAMESPACE, OpcUaSettings
     from softplc.security.users import UserStore
-    from softplc.opcua.variants import variant_for
+    from softplc.protocols.opcua_variants import variant_for
 
 # Public names and their modules, imported on first use (PEP 562): `softplc --help` imports
 # softplc.opcua.cli and must not load asyncua with it.
 _MODULES = {
     "softplc.opcua.address_space": ("tag_node_id",),
-    "softplc.opcua.client": ("ClientCertificate", "ensure_client_certificate", "make_client"),
+    "softplc.protocols.opcua_client": ("ClientCertificate", "ensure_client_certificate", "make_client"),
     "softplc.core.roles": ("Role",),
     "softplc.security.certificates": ("Pki",),
     "softplc.opcua.server": ("OpcUaServer",),
     "softplc.opcua.settings": ("DEFAULT_NAMESPACE", "OpcUaSettings"),
     "softplc.security.users": ("UserStore",),
-    "softplc.opcua.variants": ("variant_for",),
+    "softplc.protocols.opcua_variants": ("variant_for",),
 }
 __getattr__, __dir__ = lazy_exports(__name__, _MODULES)
 

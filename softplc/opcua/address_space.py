@@ -30,7 +30,7 @@ from asyncua.server.address_space import AddressSpace, AttributeValue, NodeData
 
 from softplc.core.tags import Access, Tag, TagDef
 from softplc.opcua.units import eu_information
-from softplc.opcua.variants import DATA_TYPE_IDS, data_value
+from softplc.protocols.opcua_variants import DATA_TYPE_IDS, data_value
 
 PLANT_FOLDER = "Plant"
 DIAGNOSTICS_FOLDER = "Diagnostics"

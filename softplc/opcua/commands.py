@@ -9,7 +9,7 @@
 
 The role is the session's (`softplc.opcua.roles`) and is checked by the command registry
 (`softplc.core.commands`), exactly as for the HMI and the CLI; the Origin carries the session's user
-and peer address. The command line's clients reach the runtime through here (softplc/opcua/door_client.py).
+and peer address. The command line's clients reach the runtime through here (softplc/clients/door_client.py).
 
 asyncua hands a method only the object's NodeId and the arguments, not the calling session:
 `install_caller_context` wraps each new session's Call so a method can ask `current_origin()`.
@@ -26,7 +26,7 @@ from asyncua import Server, ua
 from asyncua.server.address_space import AttributeValue
 
 from softplc.core.commands import CommandRefused, Commands
-from softplc.opcua.door_client import COMMANDS_OBJECT
+from softplc.clients.door_client import COMMANDS_OBJECT
 from softplc.opcua.roles import role_of
 from softplc.core.tagdb import Origin
 

@@ -60,7 +60,7 @@ from asyncua import ua
 from asyncua.common.utils import ServiceError
 from asyncua.server.history import HistoryManager
 
-from softplc.opcua.variants import STATUS_CODES, VARIANT_TYPES
+from softplc.protocols.opcua_variants import STATUS_CODES, VARIANT_TYPES
 from softplc.core.tagdb import TagDatabase
 from softplc.core.tags import Quality
 

@@ -21,7 +21,7 @@ from asyncua import ua
 from asyncua.server.address_space import AddressSpace
 
 from softplc.opcua.scheduling import ScanGuard
-from softplc.opcua.variants import VARIANT_TYPES, tag_data_value
+from softplc.protocols.opcua_variants import VARIANT_TYPES, tag_data_value
 from softplc.core.tagdb import TagDatabase
 from softplc.core.tags import Tag
 

@@ -48,7 +48,7 @@ from asyncua.server.subscription_service import SubscriptionService
 
 from softplc.opcua.monitoring import NO_FILTER, ChangeFilter, FilterRefused, change_filter, revise_event_queue_size, revise_queue_size
 from softplc.opcua.scheduling import ScanGuard
-from softplc.opcua.variants import TagDataValue
+from softplc.protocols.opcua_variants import TagDataValue
 
 STARVED_SECONDS = 5.0
 _CREATE_SLICE = 0.0005  # seconds of CreateMonitoredItems work between two turns of the event loop

@@ -52,7 +52,7 @@ from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AddressSpace, AttributeService
 
 from softplc.opcua.roles import role_of
-from softplc.opcua.variants import WriteStatus, value_from_variant
+from softplc.protocols.opcua_variants import WriteStatus, value_from_variant
 from softplc.core.roles import Role
 from softplc.core.tagdb import Origin, Rule, TagDatabase, WriteRejected
 

@@ -19,12 +19,12 @@ from typing import TYPE_CHECKING, Any
 from asyncua import Client, ua
 
 from softplc.core.datatypes import DataType
-from softplc.opcua.variants import DATA_TYPE_IDS
+from softplc.protocols.opcua_variants import DATA_TYPE_IDS
 from softplc.util.suggest import did_you_mean
 from softplc.core.tags import Access, Quality, TagDef
 
 if TYPE_CHECKING:
-    from softplc.opcua.login import Login
+    from softplc.clients.login import Login
 
 SOFTPLC_NAMESPACE = "urn:softplc:tags"
 _DATA_TYPES = {node_id: data_type for data_type, node_id in DATA_TYPE_IDS.items()}
@@ -218,7 +218,7 @@ class LiveSession:
 @asynccontextmanager
 async def open_live_session(login: Login) -> AsyncIterator[LiveSession]:
     """Connect with `login` and open a LiveSession; disconnect when done. Raises LoginError, NotSoftplc."""
-    from softplc.opcua.login import connect
+    from softplc.clients.login import connect
 
     client = await connect(login)
     try:

@@ -15,9 +15,9 @@ from typing import Any
 from asyncua import ua
 
 from softplc.core.datatypes import TypeMismatch
-from softplc.live.session import LiveSession, TagInfo
-from softplc.live.table import format_value
-from softplc.opcua.variants import variant_for
+from softplc.clients.session import LiveSession, TagInfo
+from softplc.clients.tags.table import format_value
+from softplc.protocols.opcua_variants import variant_for
 from softplc.core.roles import Role
 from softplc.core.tagdb import Rule, TagDatabase, WriteRejected
 

@@ -1,8 +1,8 @@
 """`softplc apply`: an online change of a running plant, from this machine or another.
 
 It logs in over OPC UA as an engineer, with the options every client command shares
-(softplc/opcua/login.py), and calls the runtime's `programs.apply` command through the server's
-door to the commands (softplc/opcua/door_client.py). The runtime re-reads the file it was
+(softplc/clients/login.py), and calls the runtime's `programs.apply` command through the server's
+door to the commands (softplc/clients/door_client.py). The runtime re-reads the file it was
 started with and checks it (softplc/engine/online_change/change.py); this command prints what it answers.
 `--config` (the plant's configuration, default tagdb.yaml here) only says where the plant serves.
 
@@ -26,7 +26,7 @@ import logging
 import sys
 from typing import Any
 
-from softplc.opcua.login import Login, LoginError, add_login_arguments, login_from_args
+from softplc.clients.login import Login, LoginError, add_login_arguments, login_from_args
 
 EXIT_OK, EXIT_REFUSED, EXIT_PROBLEMS, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED, EXIT_RESTART = 0, 1, 2, 3, 4, 5
 TIMEOUT = 75.0  # seconds: the runtime gives a check 60 s before it refuses the change
@@ -84,8 +84,8 @@ def cmd_apply(args: argparse.Namespace) -> int:
 
 async def apply(login: Login, *, check: bool) -> Any:
     """Call programs.apply on the runtime `login` reaches; its result, or ApplyError with the status."""
-    from softplc.live.session import NotSoftplc, open_live_session
-    from softplc.opcua.door_client import CommandError, call_command
+    from softplc.clients.session import NotSoftplc, open_live_session
+    from softplc.clients.door_client import CommandError, call_command
 
     try:
         async with open_live_session(login) as live:

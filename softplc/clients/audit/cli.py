@@ -23,7 +23,7 @@ from typing import Any
 
 from softplc.audit.commands import parse_time as parse_absolute
 from softplc.core.commands import CommandRefused
-from softplc.opcua.login import LoginError, add_login_arguments, login_from_args
+from softplc.clients.login import LoginError, add_login_arguments, login_from_args
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
 TABLE_LIMIT = 100  # rows a table shows unless --limit says otherwise (csv and json: every row)
@@ -184,8 +184,8 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
         raise _Failure(str(error), error.exit_status) from None
 
     async def session() -> list[dict[str, Any]]:
-        from softplc.live.session import NotSoftplc, open_live_session
-        from softplc.opcua.door_client import CommandError, call_pages
+        from softplc.clients.session import NotSoftplc, open_live_session
+        from softplc.clients.door_client import CommandError, call_pages
 
         try:
             async with open_live_session(login) as live:

@@ -1,8 +1,8 @@
 """`softplc alarms list|ack|shelve|unshelve|comment|journal|out-of-service|in-service` against a running runtime.
 
 Every subcommand calls the runtime's `alarms.*` commands through the OPC UA commands door
-(softplc/opcua/door_client.py), logged in with the options every client command shares
-(softplc/opcua/login.py: --endpoint or the plant's --config, --user, --password-stdin or
+(softplc/clients/door_client.py), logged in with the options every client command shares
+(softplc/clients/login.py: --endpoint or the plant's --config, --user, --password-stdin or
 $SOFTPLC_PASSWORD, --security); the runtime checks the role, so a viewer may list and read the
 journal but not acknowledge. Exit statuses, those of every OPC UA client command: 0 done, 1
 refused by the runtime (its reason), 2 bad command line, 3 no connection, 4 not allowed (the
@@ -21,7 +21,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from softplc.opcua.login import Login, LoginError, Security, add_login_arguments, login_from_args
+from softplc.clients.login import Login, LoginError, Security, add_login_arguments, login_from_args
 
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
 # What each action needs, to say so when the runtime refuses a session's role.
@@ -241,8 +241,8 @@ def _run(args: argparse.Namespace, calls: list[tuple[str, dict[str, Any]]], jour
 
 
 async def _session(login: Login, calls: list[tuple[str, dict[str, Any]]], journal: Journal | None) -> tuple[int, list[Any]]:
-    from softplc.live.session import NotSoftplc, open_live_session
-    from softplc.opcua.door_client import CommandError, call_command, call_pages
+    from softplc.clients.session import NotSoftplc, open_live_session
+    from softplc.clients.door_client import CommandError, call_command, call_pages
 
     results: list[Any] = []
     status = EXIT_OK

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from datetime import datetime
 from typing import Any
 
-from softplc.live.session import Reading
+from softplc.clients.session import Reading
 
 READING_HEADER = ("tag", "value", "quality", "F", "changed (UTC)")
 

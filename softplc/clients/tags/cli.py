@@ -1,6 +1,6 @@
 """`softplc read | write | watch | forces | force | unforce`: a running plant from a terminal, over OPC UA.
 
-They log in with the options every OPC UA client command shares (softplc/opcua/login.py), so they
+They log in with the options every OPC UA client command shares (softplc/clients/login.py), so they
 work from another machine as well as this one. Exit statuses:
 
     0  done
@@ -22,10 +22,10 @@ import sys
 from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING, Any
 
-from softplc.opcua.login import LoginError, add_login_arguments, login_from_args
+from softplc.clients.login import LoginError, add_login_arguments, login_from_args
 
 if TYPE_CHECKING:  # asyncua is imported when a command runs: `softplc --help` must not load it
-    from softplc.live.session import LiveSession
+    from softplc.clients.session import LiveSession
 
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
 EXAMPLES = "softplc read t01_iBL t01_qSL | softplc write t01_iFr=45 --user alice | softplc watch 't01_*' 'r0?_xpos'"
@@ -128,7 +128,7 @@ def _run(command: str, args: argparse.Namespace, body: Callable[[LiveSession], A
         return _fail(command, str(error), error.exit_status)
 
     async def session() -> int:
-        from softplc.live.session import NotSoftplc, UnknownTags, open_live_session
+        from softplc.clients.session import NotSoftplc, UnknownTags, open_live_session
 
         try:
             async with open_live_session(login) as live:
@@ -148,7 +148,7 @@ def _run(command: str, args: argparse.Namespace, body: Callable[[LiveSession], A
 
 def cmd_read(args: argparse.Namespace) -> int:
     async def body(live: LiveSession) -> int:
-        from softplc.live.table import READING_HEADER, reading_json, reading_row, table_lines
+        from softplc.clients.tags.table import READING_HEADER, reading_json, reading_row, table_lines
 
         tags = await live.match(args.tags)
         readings = await live.read(tags)
@@ -162,7 +162,7 @@ def cmd_read(args: argparse.Namespace) -> int:
 
 
 def cmd_write(args: argparse.Namespace) -> int:
-    from softplc.live.writing import parse_assignments
+    from softplc.clients.tags.writing import parse_assignments
 
     try:
         assignments = parse_assignments(args.assignments)
@@ -170,7 +170,7 @@ def cmd_write(args: argparse.Namespace) -> int:
         return _fail("write", str(error), EXIT_USAGE)
 
     async def body(live: LiveSession) -> int:
-        from softplc.live.writing import write_tags
+        from softplc.clients.tags.writing import write_tags
         from softplc.core.tagdb import Rule
 
         outcomes, sent = await write_tags(live, assignments)
@@ -188,7 +188,7 @@ def cmd_write(args: argparse.Namespace) -> int:
 
 def cmd_watch(args: argparse.Namespace) -> int:
     async def body(live: LiveSession) -> int:
-        from softplc.live.watch import WatchEnded, watch
+        from softplc.clients.tags.watch import WatchEnded, watch
 
         tags = await live.match(args.patterns)
         try:
@@ -203,9 +203,9 @@ def cmd_watch(args: argparse.Namespace) -> int:
 
 def cmd_forces(args: argparse.Namespace) -> int:
     async def body(live: LiveSession) -> int:
-        from softplc.live.forces import FORCES_HEADER, UNKNOWN_BY, list_forces
-        from softplc.opcua.door_client import CommandError
-        from softplc.live.table import format_time, format_value, table_lines
+        from softplc.clients.tags.forces import FORCES_HEADER, UNKNOWN_BY, list_forces
+        from softplc.clients.door_client import CommandError
+        from softplc.clients.tags.table import format_time, format_value, table_lines
 
         try:
             forced = await list_forces(live)
@@ -229,7 +229,7 @@ def cmd_forces(args: argparse.Namespace) -> int:
 
 
 def cmd_force(args: argparse.Namespace) -> int:
-    from softplc.live.writing import parse_assignments
+    from softplc.clients.tags.writing import parse_assignments
 
     try:
         assignments = parse_assignments(args.assignments)
@@ -246,7 +246,7 @@ def cmd_unforce(args: argparse.Namespace) -> int:
 
 async def _commands(command: str, live: LiveSession, calls: list[tuple[str, dict[str, Any]]]) -> int:
     """Call runtime commands one by one, printing what each did or why it was refused."""
-    from softplc.opcua.door_client import CommandError, call_command
+    from softplc.clients.door_client import CommandError, call_command
 
     status = EXIT_OK
     for name, arguments in calls:

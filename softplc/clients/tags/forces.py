@@ -2,7 +2,7 @@
 
 They call the runtime's commands (`tags.forces`, `tags.force`, `tags.unforce` in
 softplc/engine/runtime_commands.py) through the server's door to them, `Objects/Commands`
-(`Call(name, argumentsJSON) -> resultJSON`; client side softplc/opcua/door_client.py), which checks the
+(`Call(name, argumentsJSON) -> resultJSON`; client side softplc/clients/door_client.py), which checks the
 session's role like every other path: listing is for any role, forcing for engineers.
 
 A server without that door (an older softplc) still shows its forced tags: they are served with
@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import Any
 
-from softplc.live.session import LiveSession, Reading
-from softplc.opcua.door_client import CommandError, call_command
+from softplc.clients.session import LiveSession, Reading
+from softplc.clients.door_client import CommandError, call_command
 
 READ_CHUNK = 5000  # tags per Read request (the server takes up to 20,000)
 FORCES_HEADER = ("tag", "value", "since (UTC)", "by")

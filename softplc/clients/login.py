@@ -247,7 +247,7 @@ def with_certificate(security: Security, directory: Path = DEFAULT_CERTIFICATE_D
     """A secured mode without CERT,KEY gets the client certificate kept in `directory` (made once)."""
     if not security.secured or security.certificate is not None:
         return security
-    from softplc.opcua.client import ensure_client_certificate
+    from softplc.protocols.opcua_client import ensure_client_certificate
 
     made = ensure_client_certificate(directory, CLIENT_NAME)
     return Security(security.mode, made.certificate, made.private_key)
@@ -257,7 +257,7 @@ async def connect(login: Login, certificate_dir: Path = DEFAULT_CERTIFICATE_DIR)
     """A connected asyncua Client (close it with `await client.disconnect()`); raises LoginError."""
     from asyncua import ua
 
-    from softplc.opcua.client import ClientCertificate, make_client
+    from softplc.protocols.opcua_client import ClientCertificate, make_client
 
     security = with_certificate(login.security, certificate_dir)
     certificate = None

@@ -18,8 +18,8 @@ from typing import Any, TextIO
 
 from asyncua import Client, ua
 
-from softplc.live.session import LiveSession, Reading
-from softplc.live.table import READING_HEADER, reading_row, table_lines
+from softplc.clients.session import LiveSession, Reading
+from softplc.clients.tags.table import READING_HEADER, reading_row, table_lines
 
 MAX_REDRAWS = 10  # per second: a terminal cannot show more, and a fast task must not flood it
 CURSOR_UP = "\x1b[{}A"

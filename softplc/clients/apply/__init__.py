@@ -1,0 +1,1 @@
+"""`softplc apply`: online change of a running plant."""

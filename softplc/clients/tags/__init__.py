@@ -1,0 +1,1 @@
+"""`softplc read`, `write`, `watch`, `forces`, `force`, `unforce`: a running plant's tags from the command line."""
