@@ -28,10 +28,10 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from softplc import InOut, Param, Program  # noqa: E402
-from softplc.adapters import build_adapters  # noqa: E402
+from softplc.app.adapters import build_adapters  # noqa: E402
 from softplc.core.clock import RealClock  # noqa: E402
 from softplc.config import load_config  # noqa: E402
-from softplc.runtime import Runtime  # noqa: E402
+from softplc.app.runtime import Runtime  # noqa: E402
 
 WARMUP_S = 2.0
 

@@ -40,11 +40,11 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bench.timing import load_average  # noqa: E402
-from softplc.adapters import build_adapters  # noqa: E402
+from softplc.app.adapters import build_adapters  # noqa: E402
 from softplc.core.clock import RealClock  # noqa: E402
 from softplc.config import parse_config  # noqa: E402
 from softplc.core.roles import Role  # noqa: E402
-from softplc.runtime import Runtime  # noqa: E402
+from softplc.app.runtime import Runtime  # noqa: E402
 from softplc.core.tagdb import Origin  # noqa: E402
 
 CORE = REPO / "tests" / "core_programs.py"

@@ -43,7 +43,7 @@ from softplc.robotics.floor import Floor  # noqa: E402
 from softplc.robotics.gridmap import load_map  # noqa: E402
 from softplc.robotics.planning import ClockPlanning, ProcessPlanning  # noqa: E402
 from softplc.robotics.robots import load_robots  # noqa: E402
-from softplc.runtime import Runtime  # noqa: E402
+from softplc.app.runtime import Runtime  # noqa: E402
 
 FACTORY = REPO / "robots" / "maps" / "factory.yaml"
 POINTS = [(3.5, 7.5), (1.8, 2.5), (18.5, 7.5), (20.1, 2.4), (7.925, 5.925), (7.925, 2.925), (7.925, 4.525)]

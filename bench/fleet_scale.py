@@ -34,7 +34,7 @@ from softplc.config import load_config  # noqa: E402
 from softplc.fleet.adapter import FleetAdapter  # noqa: E402
 from softplc.robotics.gridmap import OccupancyGrid  # noqa: E402
 from softplc.robotics.robots import load_robots  # noqa: E402
-from softplc.runtime import Runtime  # noqa: E402
+from softplc.app.runtime import Runtime  # noqa: E402
 
 GOAL_ROBOTS = 100
 WIDTH, HEIGHT, LANE, SPACING = 100.0, 60.0, 2.0, 1.5

@@ -32,7 +32,7 @@ from softplc import InOut, Program  # noqa: E402
 from softplc.core.clock import SimClock  # noqa: E402
 from softplc.config import parse_config  # noqa: E402
 from softplc.core.roles import Role  # noqa: E402
-from softplc.runtime import Runtime  # noqa: E402
+from softplc.app.runtime import Runtime  # noqa: E402
 from softplc.core.tagdb import Origin  # noqa: E402
 
 BOUND = 1000

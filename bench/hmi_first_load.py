@@ -38,7 +38,7 @@ async def main(args: argparse.Namespace) -> None:
     from playwright.async_api import async_playwright
 
     state = Path(tempfile.mkdtemp(prefix="hmi-load-"))
-    runtime = subprocess.Popen([sys.executable, "-m", "softplc.cli", "run", str(REPO / "tagdb.yaml"), "--no-status", "--state-dir", str(state),
+    runtime = subprocess.Popen([sys.executable, "-m", "softplc.app.cli", "run", str(REPO / "tagdb.yaml"), "--no-status", "--state-dir", str(state),
                                 "--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/", "--modbus-port", "0", "--hmi-port", "0"],
                                stderr=subprocess.PIPE, text=True, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
     url = None

@@ -205,7 +205,7 @@ async def main(args: argparse.Namespace) -> None:
 
     folder = Path(tempfile.mkdtemp(prefix="hmi-bench-"))
     config_path = make_plant(folder, args.tags, args.rate, show=args.page == 'show')
-    command = [sys.executable, "-m", "softplc.cli", "run", str(config_path), "--no-status", "--state-dir", str(folder / "state")]
+    command = [sys.executable, "-m", "softplc.app.cli", "run", str(config_path), "--no-status", "--state-dir", str(folder / "state")]
     if args.rt_priority:
         command += ["--rt-priority", str(args.rt_priority)]
     runtime = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=folder, env={**os.environ, "PYTHONPATH": str(REPO)})

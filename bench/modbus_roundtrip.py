@@ -78,7 +78,7 @@ def start_server(folder: Path, loop: str) -> tuple[subprocess.Popen[str], int]:
     (folder / "tagdb.yaml").write_text(PLANT % registers)
     (folder / "bench_doubler.py").write_text(DOUBLER)
     process = subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "run", str(folder / "tagdb.yaml"), "--modbus-port", "0", "--no-status", "--no-opcua", "--no-hmi", "--loop", loop],
+        [sys.executable, "-m", "softplc.app.cli", "run", str(folder / "tagdb.yaml"), "--modbus-port", "0", "--no-status", "--no-opcua", "--no-hmi", "--loop", loop],
         cwd=str(REPO), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )
     assert process.stderr is not None

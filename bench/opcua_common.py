@@ -140,7 +140,7 @@ def start_server(folder: Path, yaml_text: str, *extra: str, opcua: bool = True, 
     (folder / "tagdb.yaml").write_text(yaml_text)
     (folder / "bench_changer.py").write_text(CHANGER)
     UserStore(folder / ".softplc" / "users.yaml").add(USER, Role.OPERATOR, PASSWORD)
-    command = [sys.executable, "-m", "softplc.cli", "run", str(folder / "tagdb.yaml"), "--no-status", "--no-modbus", "--no-fleet"]
+    command = [sys.executable, "-m", "softplc.app.cli", "run", str(folder / "tagdb.yaml"), "--no-status", "--no-modbus", "--no-fleet"]
     command += ["--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/", "--opcua-security", "None"] if opcua else ["--no-opcua"]
     command += list(extra)
     if nice:

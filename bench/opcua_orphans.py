@@ -185,12 +185,12 @@ async def _wait_line(process: asyncio.subprocess.Process, prefix: str, timeout: 
 
 
 async def _measure(args: argparse.Namespace) -> tuple[Recorder, dict[str, float]]:
-    from softplc.adapters import build_adapters
-    from softplc.cli import build_parser
+    from softplc.app.adapters import build_adapters
+    from softplc.app.cli import build_parser
     from softplc.core.clock import RealClock
     from softplc.opcua import OpcUaServer
     from softplc.util.realtime import use_normal_priority_executor
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
     if args.rt_priority is not None:
         use_normal_priority_executor(asyncio.get_running_loop())

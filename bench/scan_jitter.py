@@ -37,14 +37,14 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from softplc import InOut, Input, Program  # noqa: E402
-from softplc.adapters import build_adapters  # noqa: E402
-from softplc.cli import build_parser  # noqa: E402
+from softplc.app.adapters import build_adapters  # noqa: E402
+from softplc.app.cli import build_parser  # noqa: E402
 from softplc.core.clock import RealClock  # noqa: E402
 from softplc.config import ProgramConfig, TaskConfig, load_config  # noqa: E402
 from softplc.core.datatypes import DataType  # noqa: E402
 from softplc.util.durations import format_duration, parse_duration  # noqa: E402
 from softplc.util.realtime import set_realtime_priority, use_normal_priority_executor  # noqa: E402
-from softplc.runtime import Runtime  # noqa: E402
+from softplc.app.runtime import Runtime  # noqa: E402
 from softplc.engine.scan import RestartPolicy  # noqa: E402
 from softplc.core.tags import TagDef  # noqa: E402
 

@@ -25,10 +25,10 @@ class TimedRun:
 
 
 def run_softplc(*args: str) -> TimedRun:
-    """`python -m softplc.cli ARGS` from the repository, output captured; exits on failure."""
+    """`python -m softplc.app.cli ARGS` from the repository, output captured; exits on failure."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.monotonic()
-    done = subprocess.run([sys.executable, "-m", "softplc.cli", *args], capture_output=True, text=True, cwd=REPO,
+    done = subprocess.run([sys.executable, "-m", "softplc.app.cli", *args], capture_output=True, text=True, cwd=REPO,
                           env={**os.environ, "PYTHONPATH": str(REPO)})
     wall = time.monotonic() - started
     after = resource.getrusage(resource.RUSAGE_CHILDREN)

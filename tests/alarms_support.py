@@ -9,13 +9,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.core.clock import RealClock, SimClock
 from softplc.core.commands import CommandRefused
 from softplc.config import load_config
 from softplc.core.events import Event
 from softplc.core.roles import Role
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
 from softplc.core.tags import Quality
 

@@ -16,13 +16,13 @@ from typing import Any
 from asyncua import Client, ua
 
 from softplc import InOut, Program
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.audit.entry import AuditEntry
 from softplc.audit.queries import AuditQuery
 from softplc.audit.recorder import AuditRecorder
 from softplc.core.clock import RealClock
 from softplc.config import load_config
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from tests.conftest import REPO
 from tests.opcua_support import PASSWORDS, add_users
 
@@ -126,7 +126,7 @@ async def softplc(*arguments: str, home: Path, password: str | None = None, time
     env.pop("SOFTPLC_PASSWORD", None)
     if password is not None:
         env["SOFTPLC_PASSWORD"] = password
-    process = await asyncio.create_subprocess_exec(sys.executable, "-m", "softplc.cli", *arguments, env=env, stdin=asyncio.subprocess.DEVNULL,
+    process = await asyncio.create_subprocess_exec(sys.executable, "-m", "softplc.app.cli", *arguments, env=env, stdin=asyncio.subprocess.DEVNULL,
                                                    stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
     out, err = await asyncio.wait_for(process.communicate(), timeout)
     assert process.returncode is not None

@@ -12,7 +12,7 @@ from softplc.core.clock import Clock, SimClock
 from softplc.config import load_config
 from softplc.fleet.adapter import FleetAdapter
 from softplc.robotics.gridmap import OccupancyGrid
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 
 ROBOT_TEMPLATE = """\
 version: 1

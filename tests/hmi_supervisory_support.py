@@ -11,12 +11,12 @@ from pathlib import Path
 from typing import Any
 
 from hmi_support import Plant, add_users
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.hmi.server import HmiServer
 from softplc.hmi.settings import HmiSettings
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 
 PLANT = textwrap.dedent("""
     version: 1

@@ -26,7 +26,7 @@ from softplc.hmi.server import HmiServer
 from softplc.hmi.settings import HmiSettings
 from softplc.core.program import InOut, Input, Output, Program
 from softplc.core.roles import Role
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
 from softplc.security.users import UserStore
 

@@ -21,7 +21,7 @@ from softplc.config import load_config
 from softplc.modbus.server import ModbusAdapter
 from softplc.modbus.settings import ModbusSettings
 from softplc.core.program import Input, Output, Program
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 
 
 @dataclass

@@ -19,10 +19,10 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.core.clock import SimClock
 from softplc.config import load_config
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
 from softplc.core.tags import Quality
 from tests.conftest import REPO

@@ -18,7 +18,7 @@ from softplc.config import load_config
 from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.protocols.opcua_client import ClientCertificate, ensure_client_certificate, pem_certificate
 from softplc.opcua.history import HistoryProvider
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 
 PASSWORDS = {"viewer": "viewer-pass-1", "operator": "operator-pass-1", "engineer": "engineer-pass-1"}
 TEST_HASH_COST = 10  # log2 N of the tests' password hashes: milliseconds, not the default's ~0.4 s

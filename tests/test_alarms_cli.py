@@ -8,7 +8,7 @@ import io
 
 import pytest
 
-from softplc.cli import main
+from softplc.app.cli import main
 from tests.alarms_support import DRIVER, plant, running_alarm_plant
 from tests.opcua_support import PASSWORDS
 

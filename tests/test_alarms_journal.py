@@ -7,11 +7,11 @@ import csv
 import io
 from pathlib import Path
 
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.alarms.journal import AlarmJournal, JournalQuery, JournalSink, search, write_csv
 from softplc.core.clock import RealClock
 from softplc.config import load_config
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.storage import BatchWriter, Database, StorageSettings
 from tests.alarms_support import DRIVER, EPOCH, PEOPLE, call, plant, simulate, write
 

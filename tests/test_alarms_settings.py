@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-from softplc.cli import main
+from softplc.app.cli import main
 from tests.alarms_support import PLANT, plant
 
 MISTAKES = """

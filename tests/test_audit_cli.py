@@ -11,11 +11,11 @@ import re
 import textwrap
 from pathlib import Path
 
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.core.clock import SimClock
 from softplc.config import load_config
 from softplc.core.roles import Role
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
 from tests.audit_support import PASSWORDS, adapter, running, softplc, wait_until
 

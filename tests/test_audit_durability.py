@@ -65,7 +65,7 @@ def test_kill_9_during_a_write_flood_keeps_every_write_before_the_last_flush(bac
     path.write_text(plant(section))
     address = ModbusAdapter(load_config(path), ModbusSettings(port=0)).map.by_tag["counter"].address
     child = subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "run", str(path), "--no-opcua", "--no-hmi", "--modbus-port", "0", "--no-status",
+        [sys.executable, "-m", "softplc.app.cli", "run", str(path), "--no-opcua", "--no-hmi", "--modbus-port", "0", "--no-status",
          "--state-dir", str(tmp_path / "state")],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO,
     )

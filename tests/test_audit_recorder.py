@@ -9,13 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.audit.queries import AuditQuery, search
 from softplc.core.clock import RealClock
 from softplc.core.commands import CommandRefused
 from softplc.config import load_config
 from softplc.core.roles import Role
-from softplc.runtime import AdapterError, Runtime
+from softplc.app.runtime import AdapterError, Runtime
 from softplc.storage import Database
 from softplc.core.tagdb import Origin
 

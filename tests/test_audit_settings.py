@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from softplc.config import sections
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.audit.settings import DEFAULT_PARTITION, DEFAULT_RETENTION, AuditSettings
-from softplc.cli import build_parser, main
+from softplc.app.cli import build_parser, main
 from softplc.config import load_config
 
 PLANT = """\

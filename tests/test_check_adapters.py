@@ -2,7 +2,7 @@
 
 import textwrap
 
-from softplc.cli import main
+from softplc.app.cli import main
 
 
 def test_check_reports_an_overlapping_modbus_address_with_its_location(tmp_path, capsys):

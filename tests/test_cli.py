@@ -20,7 +20,7 @@ import jsonschema
 import pytest
 import yaml
 
-from softplc.cli import main
+from softplc.app.cli import main
 from softplc.config import load_config
 
 from conftest import REPO
@@ -364,8 +364,8 @@ def test_where_it_serves_is_printed_even_when_the_run_is_over_at_once(cli, plant
 
 
 def test_without_a_servers_section_every_server_runs_on_loopback_default_ports(plant: Path) -> None:
-    from softplc.adapters import build_adapters
-    from softplc.cli import build_parser
+    from softplc.app.adapters import build_adapters
+    from softplc.app.cli import build_parser
 
     adapters = {a.name: a for a in build_adapters(load_config(plant), build_parser().parse_args(["run", str(plant)]))}
     assert set(adapters) == {"audit", "opcua", "modbus", "metrics", "hmi"}
@@ -396,8 +396,8 @@ def test_run_says_which_servers_are_off_and_how_to_turn_them_on(cli, tmp_path: P
 
 
 def test_under_sim_servers_bind_free_ports_unless_a_flag_says_otherwise(plant: Path) -> None:
-    from softplc.adapters import build_adapters
-    from softplc.cli import build_parser
+    from softplc.app.adapters import build_adapters
+    from softplc.app.cli import build_parser
 
     config, parser = load_config(plant), build_parser()
 

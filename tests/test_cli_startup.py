@@ -17,16 +17,16 @@ from collections.abc import Iterator
 import pytest
 
 from conftest import REPO
-from softplc.cli import build_parser
+from softplc.app.cli import build_parser
 
 HEAVY = ("asyncua", "pymodbus", "numpy", "scipy", "sklearn", "matplotlib", "jsonschema")
 
-# Runs softplc.cli.main once per command line given as JSON in argv[1]; prints, per command
+# Runs softplc.app.cli.main once per command line given as JSON in argv[1]; prints, per command
 # line, the heavy modules it imported first (modules accumulate over the calls, so a module is
 # charged to the first command that needed it), and the exit code.
 SCRIPT = """
 import contextlib, io, json, sys
-from softplc.cli import main
+from softplc.app.cli import main
 
 heavy = set(sys.argv[2].split(","))
 seen = set()
@@ -45,7 +45,7 @@ print(json.dumps(report))
 
 
 def run_softplc(*argvs: list[str]) -> list[dict]:  # type: ignore[type-arg]
-    """Run each argv through softplc.cli.main in one fresh interpreter; what each imported."""
+    """Run each argv through softplc.app.cli.main in one fresh interpreter; what each imported."""
     result = subprocess.run(
         [sys.executable, "-c", SCRIPT, json.dumps(argvs), ",".join(HEAVY)],
         capture_output=True, text=True, cwd=REPO, timeout=120, check=False,

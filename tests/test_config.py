@@ -160,7 +160,7 @@ def test_for_each_list_bindings_and_params(make_config) -> None:
 
 async def test_list_bindings_run(make_config, tmp_path) -> None:
     from softplc.core.clock import SimClock
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
     runtime = Runtime(_summer_config(make_config), SimClock(), state_dir=tmp_path)
     await runtime.run(duration=0.1)

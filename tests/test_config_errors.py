@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from softplc.cli import main
+from softplc.app.cli import main
 from softplc.config import load_config
 from softplc.config.yamlsource import ConfigError
 

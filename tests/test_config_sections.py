@@ -13,7 +13,7 @@ import jsonschema
 import pytest
 
 from softplc.config import schema, sections
-from softplc.cli import main
+from softplc.app.cli import main
 from softplc.core.roles import Role
 from softplc.config import load_config
 from softplc.config.schema import RegistryError, Section
@@ -158,7 +158,7 @@ def test_an_owner_adds_tags_to_the_runtime_like_the_system_tags(with_notebook, t
     from softplc.core.clock import SimClock
     from softplc.modbus.address_map import Table, build_address_map
     from softplc.modbus.settings import ModbusSettings
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
     path = tmp_path / "plant.yaml"
     path.write_text("version: 1\ntags: {level: {type: float32}}\nnotebook: {database: h.sqlite}\nservers: {modbus: {}}\n")

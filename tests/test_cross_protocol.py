@@ -18,7 +18,7 @@ from softplc.config import load_config
 from softplc.modbus.server import ModbusAdapter
 from softplc.modbus.settings import ModbusSettings
 from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 
 PLANT = """
 version: 1

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from softplc.cli import main
+from softplc.app.cli import main
 from softplc.config import load_config
 from softplc.fleet import Compatibility, Hardware, compatibility_matrix, compatible, load_robots, load_tasks
 from softplc.robotics.robots import DriverKind, parse_robots, parse_tasks

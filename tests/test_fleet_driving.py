@@ -13,7 +13,7 @@ from softplc.config import load_config
 from softplc.fleet.adapter import FleetAdapter
 from softplc.robotics.gridmap import OccupancyGrid, load_map
 from softplc.robotics.loop import Sample
-from softplc.runtime import AdapterError, Runtime
+from softplc.app.runtime import AdapterError, Runtime
 
 from conftest import REPO
 from fleet_support import Plant, min_separation, robot_yaml, write_plant

@@ -101,7 +101,7 @@ def test_ctrl_c_while_the_planning_worker_starts_never_hangs(tmp_path: Path, del
     # Ctrl-C reaches the whole process group. A worker that died half-way through its start
     # once left `softplc run` blocked for good writing the planners into its pipe.
     process = subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "run", str(REPO / "tagdb.yaml"), "--no-servers", "--no-status",
+        [sys.executable, "-m", "softplc.app.cli", "run", str(REPO / "tagdb.yaml"), "--no-servers", "--no-status",
          "--state-dir", str(tmp_path)],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True, cwd=REPO,
     )

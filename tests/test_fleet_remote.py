@@ -22,7 +22,7 @@ from softplc.fleet.adapter import FleetAdapter
 from softplc.robotics.gridmap import load_map
 from softplc.robotics.robots import load_robots
 from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.core.tags import Quality
 
 from conftest import REPO
@@ -74,7 +74,7 @@ async def test_remote_agent_registers_moves_survives_restart_and_goes_bad_when_g
     await wait_for(lambda: db["r01_xpos"].quality is Quality.BAD, 2, "r01 tags BAD before the agent connects")
     env = dict(os.environ, PYTHONPATH=str(REPO), SOFTPLC_PASSWORD=PASSWORD)
     agent = subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "robot-agent", "--endpoint", server.endpoint, "--robot", "r01",
+        [sys.executable, "-m", "softplc.app.cli", "robot-agent", "--endpoint", server.endpoint, "--robot", "r01",
          "--robots", str(plant.parent / "robots.yaml"), "--map", str(MAP), "--user", "r01"],
         cwd=plant.parent, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )
@@ -154,7 +154,7 @@ async def test_remote_agent_logs_in_with_its_certificate_over_an_encrypted_chann
     runtime.add_adapter(server)
     await runtime.start()
     agent = subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "robot-agent", "--endpoint", server.endpoint, "--robot", "r01",
+        [sys.executable, "-m", "softplc.app.cli", "robot-agent", "--endpoint", server.endpoint, "--robot", "r01",
          "--robots", str(plant.parent / "robots.yaml"), "--map", str(MAP), "--certificate", str(certificate), "--private-key", str(key)],
         cwd=plant.parent, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )
@@ -177,7 +177,7 @@ def start_agent(plant: Path, endpoint: str, robot: str, password: str | None = P
         env["SOFTPLC_PASSWORD"] = password
         login = ["--user", "r01"]
     return subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "robot-agent", "--endpoint", endpoint, "--robot", robot,
+        [sys.executable, "-m", "softplc.app.cli", "robot-agent", "--endpoint", endpoint, "--robot", robot,
          "--robots", str(plant.parent / "robots.yaml"), "--map", str(MAP), *login],
         cwd=plant.parent, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )

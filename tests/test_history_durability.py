@@ -65,7 +65,7 @@ def test_kill_9_under_heavy_recording_keeps_the_store_intact(backend: str, tmp_p
     config = tmp_path / "tagdb.yaml"
     config.write_text(plant(section))
     child = subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "run", str(config), "--no-servers", "--no-status", "--state-dir", str(tmp_path / "state")],
+        [sys.executable, "-m", "softplc.app.cli", "run", str(config), "--no-servers", "--no-status", "--state-dir", str(tmp_path / "state")],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO,
     )
     reader = HistoryReader(Database(settings), "flood")
@@ -84,7 +84,7 @@ def test_kill_9_under_heavy_recording_keeps_the_store_intact(backend: str, tmp_p
         assert span is not None and span[1] - span[0] >= 3.0, "the child did not record 3 s of history within 60 s"
         # The export command reads the store while the plant writes it.
         export = subprocess.run(
-            [sys.executable, "-m", "softplc.cli", "history", "export", "tick", "v199", "--from=-1s", "--config", str(config),
+            [sys.executable, "-m", "softplc.app.cli", "history", "export", "tick", "v199", "--from=-1s", "--config", str(config),
              "--state-dir", str(tmp_path / "state")], capture_output=True, text=True, cwd=REPO, timeout=60)
         assert export.returncode == 0, export.stderr
         lines = export.stdout.splitlines()

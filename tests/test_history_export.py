@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from softplc.cli import main
+from softplc.app.cli import main
 
 from conftest import REPO
 

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.core.clock import SimClock
 from softplc.config import load_config
 from softplc.history.queries import HistoryReader
 from softplc.history.settings import SIM_FILE
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.storage import Database, StorageSettings
 from softplc.core.tags import Quality
 
@@ -198,7 +198,7 @@ def test_the_default_plant_records_its_robot_and_task_tags() -> None:
 @pytest.mark.parametrize("simulated", [True, False])
 async def test_a_store_that_cannot_be_opened_stops_the_start_with_the_reason(tmp_path: Path, simulated: bool) -> None:
     from softplc.core.clock import RealClock
-    from softplc.runtime import AdapterError
+    from softplc.app.runtime import AdapterError
 
     path = tmp_path / "tagdb.yaml"
     path.write_text(textwrap.dedent(PLANT))

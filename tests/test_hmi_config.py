@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from hmi_support import REPO, plant_yaml, write_plant
-from softplc.adapters import build_adapters
-from softplc.cli import main
+from softplc.app.adapters import build_adapters
+from softplc.app.cli import main
 from softplc.config import load_config
 from softplc.hmi.settings import HmiSettings, hmi_problems
 from softplc.core.roles import Role

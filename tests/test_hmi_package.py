@@ -26,7 +26,7 @@ SERVE = textwrap.dedent("""
     from softplc.config import parse_config
     from softplc.hmi.server import HmiServer
     from softplc.hmi.settings import HmiSettings
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
     async def main():
         config = parse_config("version: 1\\ntags: {x: {type: int16}}\\n", sys.argv[1] + "/tagdb.yaml")

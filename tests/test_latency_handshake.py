@@ -10,7 +10,7 @@ import pytest
 
 from softplc.core.clock import SimClock
 from softplc.config import PlantConfig, load_config
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.engine.scan import ProgramState
 
 from conftest import REPO

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from softplc.cli import build_parser
-from softplc.latency import command
-from softplc.latency.command import targets
+from softplc.app.cli import build_parser
+from softplc.latency import cli as command
+from softplc.latency.cli import targets
 from softplc.latency.endpoint import EndpointError, parse_endpoint
 
 

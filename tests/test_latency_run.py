@@ -17,7 +17,7 @@ from softplc.latency.measurement import Measurement, Target, measure
 from softplc.latency.plant import handshake_config
 from softplc.latency.progress import summary
 from softplc.latency.report import to_json
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 
 from conftest import REPO
 
@@ -27,7 +27,7 @@ SAMPLES = 24
 async def run_cli(*args: str, timeout: float = 120.0, env: dict[str, str] | None = None) -> tuple[int, str, str]:
     """Run `softplc ARGS` as a separate process; return (exit code, stdout, stderr)."""
     process = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "softplc.cli", *args, cwd=REPO,
+        sys.executable, "-m", "softplc.app.cli", *args, cwd=REPO,
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env={**os.environ, **(env or {})},
     )
     try:
@@ -163,7 +163,7 @@ async def test_a_hung_client_ends_the_run_and_keeps_its_samples(monkeypatch):
 
 async def _serve_handshake(tmp_path: Path, protocol: str) -> tuple[Runtime, str]:
     """A second runtime with the handshake plant, as a user would run it with `softplc run`."""
-    from softplc.adapters import build_adapters
+    from softplc.app.adapters import build_adapters
 
     if protocol == "opcua":
         from softplc.opcua import Role, UserStore
@@ -231,7 +231,7 @@ def test_the_documented_operator_login_lands_where_the_run_looks(tmp_path):
     config = tmp_path / "handshake.yaml"
     docs = (REPO / "docs" / "latency.md").read_text() + (REPO / "programs" / "handshake.yaml").read_text()
     assert "softplc users add latency --role operator --config programs/handshake.yaml" in docs
-    subprocess.run([sys.executable, "-m", "softplc.cli", "users", "add", "latency", "--role", "operator", "--config", str(config),
+    subprocess.run([sys.executable, "-m", "softplc.app.cli", "users", "add", "latency", "--role", "operator", "--config", str(config),
                     "--password-stdin"], input="handshake-password\n", text=True, check=True, capture_output=True, timeout=60)
     store = UserStore(load_config(config).state_dir / "users.yaml")
     assert "latency" in store
@@ -282,7 +282,7 @@ async def test_bad_numbers_exit_before_the_header():
 
 async def test_ctrl_c_at_start_ends_quietly():
     process = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "softplc.cli", "latency", "--protocol", "modbus", "--samples", "50", cwd=REPO,
+        sys.executable, "-m", "softplc.app.cli", "latency", "--protocol", "modbus", "--samples", "50", cwd=REPO,
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
     )
     assert process.stderr is not None

@@ -22,7 +22,7 @@ from softplc.core.datatypes import TypeMismatch
 from softplc.opcua import OpcUaServer, Pki
 from softplc.protocols.opcua_client import ensure_client_certificate
 from softplc.core.roles import Role
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin, Rule, WriteRejected
 from tests.conftest import REPO
 from tests.opcua_support import PASSWORDS, running_plant, wait_until
@@ -38,7 +38,7 @@ async def softplc(*arguments: str, home: Path, password: str | None = None, stdi
     if password is not None:
         env["SOFTPLC_PASSWORD"] = password
     process = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "softplc.cli", *arguments, env=env,
+        sys.executable, "-m", "softplc.app.cli", *arguments, env=env,
         stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
     )
     out, err = await asyncio.wait_for(process.communicate(stdin.encode() if stdin is not None else b""), timeout)

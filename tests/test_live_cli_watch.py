@@ -66,7 +66,7 @@ class Terminal:
         pid, fd = pty.fork()
         if pid == 0:  # the child: size the terminal, become softplc
             fcntl.ioctl(0, termios.TIOCSWINSZ, struct.pack("HHHH", ROWS, COLUMNS, 0, 0))
-            os.execve(sys.executable, [sys.executable, "-m", "softplc.cli", *arguments], env)
+            os.execve(sys.executable, [sys.executable, "-m", "softplc.app.cli", *arguments], env)
         self.pid, self.fd = pid, fd
         self.output = ""
         self.screen = Screen()
@@ -148,7 +148,7 @@ async def test_watch_says_when_the_server_goes_away(tmp_path: Path) -> None:
     env = dict(os.environ, PYTHONPATH=str(REPO), HOME=str(tmp_path))
     async with running_plant(tmp_path) as (runtime, server):
         process = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "softplc.cli", "watch", "i16", "--endpoint", server.endpoint, env=env,
+            sys.executable, "-m", "softplc.app.cli", "watch", "i16", "--endpoint", server.endpoint, env=env,
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
         )
         assert process.stdout is not None and process.stderr is not None

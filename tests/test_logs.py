@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from asyncua import Client, ua
 
-from softplc.cli import main
+from softplc.app.cli import main
 from tests.conftest import REPO
 
 PROGRAMS = '''
@@ -183,7 +183,7 @@ async def test_a_client_flood_of_refused_writes_writes_a_few_lines(tmp_path: Pat
     log = tmp_path / "plant.log"
     (tmp_path / "plant.yaml").write_text("version: 1\nplant: {name: flood}\ntags:\n  x: {type: int32}\n")
     process = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "softplc.cli", "run", str(tmp_path / "plant.yaml"), "--no-status", "--log-file", str(log),
+        sys.executable, "-m", "softplc.app.cli", "run", str(tmp_path / "plant.yaml"), "--no-status", "--log-file", str(log),
         "--opcua-endpoint", "opc.tcp://127.0.0.1:0/softplc/", "--modbus-port", "0",
         stderr=asyncio.subprocess.PIPE, env=dict(os.environ, PYTHONPATH=str(REPO)),
     )

@@ -22,13 +22,13 @@ from prometheus_client.parser import text_string_to_metric_families
 from pymodbus.client import AsyncModbusTcpClient
 
 from hmi_support import PASSWORDS, add_users, start_plant, wait_until
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.metrics.adapter import MetricsAdapter
 from softplc.metrics.histograms import SeriesHistogram
 from softplc.metrics.settings import MetricsSettings
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.engine.stats import TimingSeries
 
 REPO = Path(__file__).resolve().parent.parent

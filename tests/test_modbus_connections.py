@@ -11,7 +11,7 @@ import pytest
 from modbus_helpers import DOUBLER_PLANT as PLANT
 from modbus_helpers import mbap, start_plant, stop_plant
 
-from softplc.cli import main
+from softplc.app.cli import main
 from softplc.config import load_config
 from softplc.modbus.connections import EventReport
 from softplc.modbus.settings import ModbusSettings

@@ -138,7 +138,7 @@ EXAMPLES = documented_examples()
 @pytest.fixture(scope="module")
 def address_map() -> dict:
     """`softplc modbus-map --format json` of the default plant, as users see it."""
-    done = subprocess.run([sys.executable, "-m", "softplc.cli", "modbus-map", "--format", "json"], cwd=str(REPO),
+    done = subprocess.run([sys.executable, "-m", "softplc.app.cli", "modbus-map", "--format", "json"], cwd=str(REPO),
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
@@ -212,7 +212,7 @@ class Plant:
 def default_plant(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Plant]:
     folder: Path = tmp_path_factory.mktemp("docs")
     process = subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "run", "--modbus-port", "0", "--no-opcua", "--no-status",
+        [sys.executable, "-m", "softplc.app.cli", "run", "--modbus-port", "0", "--no-opcua", "--no-status",
          "--state-dir", str(folder / "state")],
         cwd=str(REPO), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )

@@ -11,7 +11,7 @@ from pymodbus.constants import ExcCodes
 
 from softplc.modbus.server import ModbusAdapter
 from softplc.modbus.settings import ModbusSettings
-from softplc.runtime import AdapterError, Runtime
+from softplc.app.runtime import AdapterError, Runtime
 
 PLANT = """
 version: 1

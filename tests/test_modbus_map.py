@@ -10,7 +10,7 @@ import struct
 
 import pytest
 
-from softplc.cli import main
+from softplc.app.cli import main
 from softplc.core.datatypes import DataType
 from softplc.modbus.address_map import Table, build_address_map
 from softplc.modbus.codec import CodecError, RegisterCodec
@@ -269,8 +269,8 @@ def test_an_overlap_hidden_behind_a_short_tag_is_found(make_config):
 
 
 def test_run_flags_build_or_skip_the_modbus_adapter(make_config, capsys):
-    from softplc.adapters import build_adapters
-    from softplc.cli import build_parser
+    from softplc.app.adapters import build_adapters
+    from softplc.app.cli import build_parser
 
     config = make_config(BASE + "servers:\n  modbus: {port: 1502}\n")
     parser = build_parser()

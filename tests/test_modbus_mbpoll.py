@@ -57,7 +57,7 @@ def softplc(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Softplc]:
     config = folder / "tagdb.yaml"
     config.write_text(PLANT)
     process = subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "run", str(config), "--modbus-port", "0", "--no-opcua", "--no-status",
+        [sys.executable, "-m", "softplc.app.cli", "run", str(config), "--modbus-port", "0", "--no-opcua", "--no-status",
          "--state-dir", str(folder / "state")],
         cwd=str(REPO), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )

@@ -16,7 +16,7 @@ from softplc.core.commands import CommandRefused
 from softplc.config import load_config
 from softplc.engine.online_change.change import ChangeRefused
 from softplc.core.roles import Role
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
 
 from conftest import REPO

@@ -51,7 +51,7 @@ tasks:
 async def softplc(*args: str, password: str | None = None) -> tuple[int, str, str]:
     """`softplc ARGS` in a process of its own, the password on its stdin; (exit status, stdout, stderr)."""
     process = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "softplc.cli", *args, stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+        sys.executable, "-m", "softplc.app.cli", *args, stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.PIPE, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)},
     )
     out, err = await asyncio.wait_for(process.communicate(f"{password or ''}\n".encode()), 60)

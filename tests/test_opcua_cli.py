@@ -14,13 +14,13 @@ from pathlib import Path
 import pytest
 from asyncua import Client, ua
 
-from softplc.cli import main
+from softplc.app.cli import main
 from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.opcua import OpcUaServer, OpcUaSettings, UserStore
 from softplc.opcua.settings import SettingsError
 from softplc.security.users import verify_password
-from softplc.runtime import AdapterError, Runtime
+from softplc.app.runtime import AdapterError, Runtime
 from tests.conftest import REPO
 from tests.opcua_support import PLANT, write_config
 
@@ -39,7 +39,7 @@ servers:
 def softplc(*arguments: str, cwd: Path, stdin: str | None = None, timeout: float = 60) -> subprocess.CompletedProcess[str]:
     """`softplc ARGUMENTS` in its own process."""
     return subprocess.run(
-        [sys.executable, "-m", "softplc.cli", *arguments], cwd=cwd, input=stdin, capture_output=True, text=True,
+        [sys.executable, "-m", "softplc.app.cli", *arguments], cwd=cwd, input=stdin, capture_output=True, text=True,
         timeout=timeout, env=dict(os.environ, PYTHONPATH=str(REPO)),
     )
 
@@ -141,7 +141,7 @@ def test_run_serves_with_command_line_overrides(tmp_path: Path) -> None:
     (tmp_path / "tagdb.yaml").write_text(SMALL.replace("    security: [None]\n", "    security: [Basic256Sha256_Sign]\n"))
 
     process = subprocess.Popen(
-        [sys.executable, "-m", "softplc.cli", "run", "--opcua-security", "None", "--opcua-anonymous", "viewer", "--no-modbus", "--no-status"],
+        [sys.executable, "-m", "softplc.app.cli", "run", "--opcua-security", "None", "--opcua-anonymous", "viewer", "--no-modbus", "--no-status"],
         cwd=tmp_path, stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONPATH=str(REPO)),
     )
     try:

@@ -40,7 +40,7 @@ async def _secured(server, certificate, mode, user: str | None = "operator", pas
 def _cli(directory: Path, *arguments: str) -> subprocess.CompletedProcess[str]:
     env = dict(os.environ, PYTHONPATH=str(REPO))
     return subprocess.run(
-        [sys.executable, "-m", "softplc.cli", *arguments, "--config", str(directory / "tagdb.yaml"), "--state-dir", str(directory / "state")],
+        [sys.executable, "-m", "softplc.app.cli", *arguments, "--config", str(directory / "tagdb.yaml"), "--state-dir", str(directory / "state")],
         capture_output=True, text=True, timeout=60, env=env, cwd=directory,
     )
 

@@ -17,7 +17,7 @@ from softplc.config import load_config
 from softplc.modbus.server import ModbusAdapter
 from softplc.modbus.settings import ModbusSettings
 from softplc.opcua import OpcUaServer, OpcUaSettings
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.core.tagdb import WriteEvent
 from tests.opcua_support import add_users, client_for, running_plant, wait_until
 

@@ -11,7 +11,7 @@ import pytest
 from softplc.core.clock import SimClock
 from softplc.core.commands import CommandRefused
 from softplc.core.roles import Role
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
 
 from conftest import REPO

@@ -7,7 +7,7 @@ import pytest
 from programs.plant_simulator import MaterialHandlingPlant
 from softplc.core.clock import SimClock
 from softplc.core.program import ProgramContext
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 
 PLANT = """
 version: 1

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from conftest import REPO
-from softplc.cli import main
+from softplc.app.cli import main
 from softplc.core.clock import SimClock
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.svm.dataset import (
     DatasetError,
     balance_rule,
@@ -29,7 +29,7 @@ from softplc.svm.dataset import (
 )
 from softplc.svm.model import ModelError, TaskModel, train
 
-SOFTPLC = [sys.executable, "-m", "softplc.cli"]
+SOFTPLC = [sys.executable, "-m", "softplc.app.cli"]
 MODELS = REPO / "scenarios" / "svm"
 
 

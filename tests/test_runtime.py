@@ -16,7 +16,7 @@ from softplc.core.commands import CommandRefused
 from softplc.config import load_config
 from softplc.core.expression import Condition
 from softplc.core.roles import Role
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
 from softplc.core.tags import Quality
 
@@ -553,7 +553,7 @@ async def test_identical_histories_with_the_default_plants_robots(tmp_path: Path
     """The default plant with the adapters `softplc run --sim --no-servers` starts (the robots)."""
     import argparse
 
-    from softplc.adapters import build_adapters
+    from softplc.app.adapters import build_adapters
 
     histories = []
     for run in range(2):

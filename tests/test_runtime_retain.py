@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from softplc.cli import main
+from softplc.app.cli import main
 from softplc.core.clock import SimClock
 from softplc.engine.retain import RetainError, RetainStore
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 
 RETAIN = """
 version: 1

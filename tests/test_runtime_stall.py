@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from softplc.core.clock import RealClock
-from softplc.runtime import Runtime, RuntimeState
+from softplc.app.runtime import Runtime, RuntimeState
 
 from conftest import REPO
 

@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from softplc.core.clock import SimClock
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 
 from conftest import REPO
 

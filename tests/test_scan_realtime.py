@@ -13,7 +13,7 @@ import pytest
 
 from softplc.core.clock import RealClock
 from softplc.core.expression import Condition
-from softplc.runtime import Runtime, RuntimeState
+from softplc.app.runtime import Runtime, RuntimeState
 
 from conftest import REPO
 

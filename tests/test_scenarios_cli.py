@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from conftest import REPO
-from softplc.cli import main
+from softplc.app.cli import main
 from softplc.scenarios.spec import load_scenario
 from softplc.config.yamlsource import ConfigError
 

@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from softplc.config import PlantConfig
-from softplc.runtime import Adapter, Runtime
+from softplc.app.runtime import Adapter, Runtime
 from softplc.scenarios.runner import RunResult, fleet_adapter, run_scenario
 from softplc.scenarios.spec import Scenario, load_scenario
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from softplc.cli import build_parser, cmd_run
+from softplc.app.cli import build_parser, cmd_run
 from tests.conftest import REPO
 
 UNIT = REPO / "contrib" / "softplc.service"
@@ -50,7 +50,7 @@ def test_exec_start_is_a_softplc_run_command_line_that_parses() -> None:
     assert args.func is cmd_run
     assert str(args.config) == "/etc/softplc/tagdb.yaml" and str(args.state_dir) == "/var/lib/softplc"
     assert args.state_dir.name == unit()["Service"]["StateDirectory"]
-    help_text = subprocess.run([sys.executable, "-m", "softplc.cli", "run", "--help"], capture_output=True, text=True,
+    help_text = subprocess.run([sys.executable, "-m", "softplc.app.cli", "run", "--help"], capture_output=True, text=True,
                                timeout=60, cwd=REPO).stdout
     for option in (word.split("=")[0] for word in argv[2:] if word.startswith("--")):
         assert option in help_text

@@ -3,7 +3,7 @@
 from softplc.core.clock import SimClock
 from softplc.config import load_config
 from softplc.core.expression import Condition
-from softplc.runtime import Runtime
+from softplc.app.runtime import Runtime
 from softplc.engine.scan import ProgramState
 
 from conftest import REPO
@@ -12,7 +12,7 @@ from conftest import REPO
 async def test_default_plant_delivers_until_an_output_storage_is_full(tmp_path):
     config = load_config(REPO / "tagdb.yaml")
     runtime = Runtime(config, SimClock(), state_dir=tmp_path)
-    from softplc.adapters import build_adapters
+    from softplc.app.adapters import build_adapters
 
     for adapter in build_adapters(config, None):
         if adapter.name == "fleet":  # the robots, without network servers

@@ -1,6 +1,6 @@
 """The alarms adapter: runs the engine at scan boundaries, keeps the journal and the summary tags.
 
-Built by `softplc.adapters` from the `alarms:` section. Under `run --sim` the journal is a
+Built by `softplc.app.adapters` from the `alarms:` section. Under `run --sim` the journal is a
 SQLite file of its own (STATE_DIR/alarms-sim.sqlite, emptied at each start, timestamps in
 simulated time), never the real plant's journal.
 """
@@ -23,7 +23,7 @@ from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlit
 from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 log = logging.getLogger(__name__)
 

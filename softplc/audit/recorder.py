@@ -31,7 +31,7 @@ from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlit
 from softplc.core.tagdb import TagDatabase, WriteEvent
 
 if TYPE_CHECKING:
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +60,7 @@ class AuditRecorder:
         self._undo: list[Callable[[], None]] = []
 
     async def start(self, runtime: Runtime) -> None:
-        from softplc.runtime import AdapterError
+        from softplc.app.runtime import AdapterError
 
         self._clock = runtime.clock
         self._simulated = simulated = runtime.clock.simulated

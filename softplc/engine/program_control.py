@@ -26,7 +26,7 @@ from softplc.util.suggest import did_you_mean
 
 
 class _Runtime(Protocol):
-    """What these commands use of `softplc.runtime.Runtime` (which imports this module)."""
+    """What these commands use of `softplc.app.runtime.Runtime` (which imports this module)."""
 
     commands: Commands
     clock: Clock

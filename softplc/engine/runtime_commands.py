@@ -20,7 +20,7 @@ from softplc.core.tagdb import Origin, TagDatabase, WriteRejected
 
 
 class _Runtime(Protocol):
-    """What these commands use of `softplc.runtime.Runtime` (which imports this module)."""
+    """What these commands use of `softplc.app.runtime.Runtime` (which imports this module)."""
 
     commands: Commands
     db: TagDatabase

@@ -31,7 +31,7 @@ from softplc.core.tagdb import Origin, TagDatabase
 from softplc.core.tags import Quality, Tag
 
 if TYPE_CHECKING:
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 log = logging.getLogger(__name__)
 
@@ -156,7 +156,7 @@ class FleetAdapter:
     # -- adapter protocol ----------------------------------------------------------------
 
     async def start(self, runtime: Runtime) -> None:
-        from softplc.runtime import AdapterError
+        from softplc.app.runtime import AdapterError
 
         self._runtime = runtime
         db = runtime.db

@@ -26,7 +26,7 @@ from softplc.history.reads import MAX_VALUES, InvalidContinuation, as_dict, read
 from softplc.history.store import TagInfo
 
 if TYPE_CHECKING:
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 log = logging.getLogger(__name__)
 

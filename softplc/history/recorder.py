@@ -26,7 +26,7 @@ from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlit
 from softplc.core.tags import Quality, Tag
 
 if TYPE_CHECKING:
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 log = logging.getLogger(__name__)
 
@@ -112,7 +112,7 @@ class HistoryRecorder:
         self._unregister: Any = None
 
     async def start(self, runtime: Runtime) -> None:
-        from softplc.runtime import AdapterError
+        from softplc.app.runtime import AdapterError
 
         self._runtime = runtime
         simulated = runtime.clock.simulated

@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from softplc.hmi.shell import Shell
     from softplc.hmi.views import View
     from softplc.hmi.writelog import WriteLog
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 
 class HmiServer(Protocol):

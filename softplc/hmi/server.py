@@ -42,7 +42,7 @@ from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ class HmiServer:
     # -- lifecycle ----------------------------------------------------------------------------
 
     async def start(self, runtime: Runtime) -> None:
-        from softplc.runtime import AdapterError
+        from softplc.app.runtime import AdapterError
 
         settings = self.settings
         self.runtime = runtime
@@ -177,7 +177,7 @@ class HmiServer:
 
     async def _ssl_context(self, runtime: Runtime) -> Any:
         from softplc.hmi.tls import ensure_certificate, server_context
-        from softplc.runtime import AdapterError
+        from softplc.app.runtime import AdapterError
 
         settings = self.settings
         try:

@@ -63,9 +63,9 @@ async def _measure(target: Target, result: Measurement, progress: Progress, stop
         result.target = target
         await run_client(target, result, progress, stop)
         return
-    from softplc.adapters import build_adapters
+    from softplc.app.adapters import build_adapters
     from softplc.core.clock import RealClock
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
     with tempfile.TemporaryDirectory(prefix="softplc-latency-") as state_dir:
         state = Path(state_dir)

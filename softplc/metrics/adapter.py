@@ -32,7 +32,7 @@ from softplc.util.peers import PeerLog
 
 if TYPE_CHECKING:
     from softplc.hmi.server import HmiServer
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 log = logging.getLogger(__name__)
 
@@ -59,7 +59,7 @@ class MetricsAdapter:
         from prometheus_client.aiohttp import make_aiohttp_handler
 
         from softplc.metrics.collector import RuntimeCollector
-        from softplc.runtime import AdapterError
+        from softplc.app.runtime import AdapterError
 
         path = self.settings.token_path(runtime.state_dir)
         if path is not None:

@@ -22,7 +22,7 @@ from softplc.metrics.histograms import LATENCY_BUCKETS, SCAN_BUCKETS, SeriesHist
 from softplc.engine.program_instance import ProgramState
 
 if TYPE_CHECKING:
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
     from softplc.engine.scan import Task
 
 log = logging.getLogger(__name__)

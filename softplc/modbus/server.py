@@ -37,7 +37,7 @@ from softplc.modbus.identification import device_objects, identification_request
 from softplc.modbus.image import RegisterImage
 from softplc.modbus.requests import LIMITS, RequestGuard, guarded_requests
 from softplc.modbus.settings import ModbusSettings, settings_problems
-from softplc.runtime import AdapterError, Runtime
+from softplc.app.runtime import AdapterError, Runtime
 from softplc.core.tagdb import Origin, Rule, TagDatabase
 from softplc.config.yamlsource import ConfigError
 

@@ -35,7 +35,7 @@ from softplc.opcua.condition_events import EventTypeId, attribute_value, fill, f
 from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 log = logging.getLogger(__name__)
 

@@ -3,7 +3,7 @@
 The OPC UA adapter never imports the historian: it asks the command registry. `CommandHistory.
 connect(commands)` is None when no historian runs; otherwise it has learnt, once, which tags
 have history and which aggregates are offered (the historian starts before the OPC UA server,
-see softplc/adapters.py, so the address space can say Historizing). Each read is one command
+see softplc/app/adapters.py, so the address space can say Historizing). Each read is one command
 call; the historian's results (quality + Part 13 flags) become exact OPC UA StatusCodes here.
 
 The reads are called with an internal origin: the `history.*` commands are VIEW ones, which every

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 DEFAULT_GUARD_SECONDS = 0.0015
 

@@ -51,7 +51,7 @@ from softplc.opcua.writes import MAX_NODES_PER_READ, MAX_NODES_PER_WRITE, TagAtt
 from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +90,7 @@ class OpcUaServer:
     # -- lifecycle ------------------------------------------------------------------------
 
     async def start(self, runtime: Runtime) -> None:
-        from softplc.runtime import AdapterError
+        from softplc.app.runtime import AdapterError
 
         started = time.perf_counter()
         settings = self.settings
@@ -102,7 +102,7 @@ class OpcUaServer:
         self._secured_channels = SecuredChannels()
         self.guard = ScanGuard.for_runtime(runtime)
         if self._given_history is None:
-            # The historian (started before us, softplc/adapters.py) serves its reads as commands.
+            # The historian (started before us, softplc/app/adapters.py) serves its reads as commands.
             self.history = await CommandHistory.connect(runtime.commands) or NoHistory()
         self.user_manager = SoftplcUserManager(self.users, settings.anonymous_role)
         server = GuardedServer(

@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from softplc.scenarios.spec import Scenario, builtin_scenarios, find_scenario, load_scenario
 
 # Public names and their modules, imported on first use (PEP 562): `softplc --help` imports
-# softplc.scenarios.commands and must not load the runner (the fleet, numpy, scipy) with it.
+# softplc.scenarios.cli and must not load the runner (the fleet, numpy, scipy) with it.
 _MODULES = {
     "softplc.scenarios.runner": ("RunResult", "run_scenario", "run_scenario_async"),
     "softplc.scenarios.spec": ("Scenario", "builtin_scenarios", "find_scenario", "load_scenario"),

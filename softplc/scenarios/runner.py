@@ -20,7 +20,7 @@ from typing import Any
 
 from softplc.core.clock import SimClock
 from softplc.config import PlantConfig
-from softplc.runtime import Adapter, Runtime
+from softplc.app.runtime import Adapter, Runtime
 from softplc.scenarios.plant import build_plant
 from softplc.scenarios.recorder import Recorder
 from softplc.scenarios.spec import Scenario

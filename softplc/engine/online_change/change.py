@@ -48,7 +48,7 @@ CHECK_TIMEOUT = 60.0  # a new version's setup() that never returns: the engineer
 
 
 class _Runtime(Protocol):
-    """What the online change uses of `softplc.runtime.Runtime` (which imports this module)."""
+    """What the online change uses of `softplc.app.runtime.Runtime` (which imports this module)."""
 
     config: PlantConfig
     clock: Clock

@@ -86,7 +86,7 @@ def _load(name: str):  # type: ignore[no-untyped-def]
 def cmd_run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from softplc.runtime import AdapterError
+    from softplc.app.runtime import AdapterError
     from softplc.scenarios.progress import ProgressBar
     from softplc.scenarios.runner import run_scenario
 

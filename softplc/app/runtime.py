@@ -1,7 +1,7 @@
 """The composition root: builds the core from a PlantConfig and runs it with its adapters.
 
 The core (tag database, scan engine, clock) knows nothing of protocols or robots; adapters
-(see `softplc.adapters`) are handed the runtime when they start and use only its public API:
+(see `softplc.app.adapters`) are handed the runtime when they start and use only its public API:
 `runtime.db` (values: snapshot, subscribe to changes, submit writes with an origin),
 `runtime.commands` (actions with an origin: reset faults, program control, online change...),
 `runtime.events` (what happened: alarm transitions...), `runtime.clock`, `runtime.engine`,

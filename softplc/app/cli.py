@@ -38,7 +38,7 @@ EXIT_RETAIN_CORRUPT = 3  # `softplc run`: retain.sqlite is corrupt; nothing star
 DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules that add subcommands (each defines add_commands(subparsers)).
-COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.commands", "softplc.scenarios.commands", "softplc.latency.command", "softplc.opcua.cli", "softplc.fleet.cli",
+COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.cli", "softplc.scenarios.cli", "softplc.latency.cli", "softplc.opcua.cli", "softplc.fleet.cli",
                                    "softplc.history.export", "softplc.clients.alarms.cli", "softplc.clients.tags.cli", "softplc.clients.apply.cli",
                                    "softplc.clients.audit.cli")
 
@@ -112,7 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the scan loop under real-time scheduling (SCHED_FIFO, 1-99) so other processes "
         "cannot delay it; needs root or CAP_SYS_NICE",
     )
-    from softplc.adapters import add_run_arguments
+    from softplc.app.adapters import add_run_arguments
 
     add_run_arguments(run)
     run.set_defaults(func=cmd_run)
@@ -163,9 +163,9 @@ def _print_problems(error: ConfigError, stream: TextIO | None = None) -> None:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from softplc.adapters import build_adapters
+    from softplc.app.adapters import build_adapters
 
-    from softplc.runtime import Runtime
+    from softplc.app.runtime import Runtime
 
     config = load_config(args.config)
     # Building (not starting) the runtime creates every program instance, and building the
@@ -226,11 +226,11 @@ def cmd_tags(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from softplc.adapters import build_adapters
+    from softplc.app.adapters import build_adapters
     from softplc.engine.retain import RetainError
-    from softplc.runtime import AdapterError, Runtime
-    from softplc.stop_signals import StopSignals
-    from softplc.stop_signals import describe as describe_signal
+    from softplc.app.runtime import AdapterError, Runtime
+    from softplc.app.stop_signals import StopSignals
+    from softplc.app.stop_signals import describe as describe_signal
 
     config = load_config(args.config)
     if args.speed is not None and not args.sim:
@@ -355,7 +355,7 @@ async def _status_loop(runtime: Any, show: bool, args: argparse.Namespace) -> No
         print(f"serving: {adapter.describe()}", file=sys.stderr)
     if not runtime.adapters:
         print("serving: nothing (no server enabled)", file=sys.stderr)
-    from softplc.adapters import servers_off
+    from softplc.app.adapters import servers_off
 
     for note in servers_off(runtime.config, args):
         print(f"not serving: {note}", file=sys.stderr)

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from softplc.config import PlantConfig
     from softplc.modbus.settings import ModbusSettings
     from softplc.opcua.settings import OpcUaSettings
-    from softplc.runtime import Adapter
+    from softplc.app.runtime import Adapter
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     """Flags of `softplc run` that belong to adapters."""

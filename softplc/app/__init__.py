@@ -1,0 +1,1 @@
+"""The application: the `softplc` command line, adapter discovery, the composition root (Runtime), stop signals."""
