@@ -37,7 +37,7 @@ sys.path.insert(0, str(REPO))
 
 from softplc.core.clock import RealClock, SimClock  # noqa: E402
 from softplc.config import load_config  # noqa: E402
-from softplc.fleet.adapter import FleetAdapter  # noqa: E402
+from softplc.adapters.fleet.adapter import FleetAdapter  # noqa: E402
 from softplc.robotics.driver import PlanRequest  # noqa: E402
 from softplc.robotics.floor import Floor  # noqa: E402
 from softplc.robotics.gridmap import load_map  # noqa: E402

@@ -31,7 +31,7 @@ sys.path.insert(0, str(REPO))
 
 from softplc.core.clock import RealClock  # noqa: E402
 from softplc.config import load_config  # noqa: E402
-from softplc.fleet.adapter import FleetAdapter  # noqa: E402
+from softplc.adapters.fleet.adapter import FleetAdapter  # noqa: E402
 from softplc.robotics.gridmap import OccupancyGrid  # noqa: E402
 from softplc.robotics.robots import load_robots  # noqa: E402
 from softplc.app.runtime import Runtime  # noqa: E402

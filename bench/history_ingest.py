@@ -107,9 +107,9 @@ async def measure(args: argparse.Namespace, state: Path) -> dict[str, float]:
 def recording_cost(tags: int, rounds: int = 20) -> tuple[float, float]:
     """CPU µs per value of the filter (event loop) and of the sink's write + commit (writer thread),
     measured with thread CPU time, so a busy machine does not inflate them."""
-    from softplc.history.recorder import TagFilter
-    from softplc.history.settings import TagPolicy
-    from softplc.history.store import HistorySink, TagInfo
+    from softplc.adapters.history.recorder import TagFilter
+    from softplc.adapters.history.settings import TagPolicy
+    from softplc.adapters.history.store import HistorySink, TagInfo
     from softplc.storage import Database, StorageSettings
     from softplc.core.tags import Quality
 
@@ -152,7 +152,7 @@ def main() -> int:
     args = parser.parse_args()
     load_before = load_average()
     if args.no_write:
-        from softplc.history.store import HistorySink
+        from softplc.adapters.history.store import HistorySink
 
         HistorySink.write = lambda self, connection, database, rows: None  # type: ignore[method-assign]
     with tempfile.TemporaryDirectory(prefix="softplc-ingest-") as directory:

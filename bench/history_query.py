@@ -25,8 +25,8 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bench.timing import load_average  # noqa: E402
-from softplc.history.queries import HistoryReader  # noqa: E402
-from softplc.history.store import HistorySink, TagInfo  # noqa: E402
+from softplc.adapters.history.queries import HistoryReader  # noqa: E402
+from softplc.adapters.history.store import HistorySink, TagInfo  # noqa: E402
 from softplc.storage import BatchWriter, Database, StorageSettings  # noqa: E402
 from softplc.core.tags import Quality  # noqa: E402
 

@@ -53,7 +53,7 @@ history: {{flush_period: 1s}}
 
 
 def prefill(state: Path) -> None:
-    from softplc.history.store import HistorySink, TagInfo
+    from softplc.adapters.history.store import HistorySink, TagInfo
     from softplc.storage import BatchWriter, Database, StorageSettings
     from softplc.core.tags import Quality
 

@@ -200,8 +200,8 @@ async def main(args: argparse.Namespace) -> None:
     from pymodbus.client import AsyncModbusTcpClient
 
     from softplc.config import load_config
-    from softplc.modbus.address_map import build_address_map
-    from softplc.modbus.settings import ModbusSettings
+    from softplc.adapters.modbus.address_map import build_address_map
+    from softplc.adapters.modbus.settings import ModbusSettings
 
     folder = Path(tempfile.mkdtemp(prefix="hmi-bench-"))
     config_path = make_plant(folder, args.tags, args.rate, show=args.page == 'show')

@@ -22,7 +22,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from softplc.opcua import Role, UserStore  # noqa: E402
+from softplc.adapters.opcua import Role, UserStore  # noqa: E402
 
 USER, PASSWORD = "bench", "bench-password-1"
 logging.getLogger("asyncua").setLevel(logging.ERROR)  # the client's notes on revised parameters are noise here

@@ -188,7 +188,7 @@ async def _measure(args: argparse.Namespace) -> tuple[Recorder, dict[str, float]
     from softplc.app.adapters import build_adapters
     from softplc.app.cli import build_parser
     from softplc.core.clock import RealClock
-    from softplc.opcua import OpcUaServer
+    from softplc.adapters.opcua import OpcUaServer
     from softplc.util.realtime import use_normal_priority_executor
     from softplc.app.runtime import Runtime
 

@@ -133,7 +133,7 @@ async def simulate(directory: Path, text: str, steps: Sequence[Step], duration: 
 @asynccontextmanager
 async def running_alarm_plant(directory: Path, text: str, *, modbus: bool = False) -> AsyncIterator[tuple[Runtime, Any]]:
     """The plant in real time with its alarms and an OPC UA server on a free loopback port (users of every role)."""
-    from softplc.opcua import OpcUaServer, OpcUaSettings
+    from softplc.adapters.opcua import OpcUaServer, OpcUaSettings
     from tests.opcua_support import add_users
 
     path = directory / "tagdb.yaml"

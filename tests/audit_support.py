@@ -17,9 +17,9 @@ from asyncua import Client, ua
 
 from softplc import InOut, Program
 from softplc.app.adapters import build_adapters
-from softplc.audit.entry import AuditEntry
-from softplc.audit.queries import AuditQuery
-from softplc.audit.recorder import AuditRecorder
+from softplc.adapters.audit.entry import AuditEntry
+from softplc.adapters.audit.queries import AuditQuery
+from softplc.adapters.audit.recorder import AuditRecorder
 from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.app.runtime import Runtime

@@ -10,7 +10,7 @@ from typing import Any
 
 from softplc.core.clock import Clock, SimClock
 from softplc.config import load_config
-from softplc.fleet.adapter import FleetAdapter
+from softplc.adapters.fleet.adapter import FleetAdapter
 from softplc.robotics.gridmap import OccupancyGrid
 from softplc.app.runtime import Runtime
 

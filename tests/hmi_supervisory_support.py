@@ -14,8 +14,8 @@ from hmi_support import Plant, add_users
 from softplc.app.adapters import build_adapters
 from softplc.core.clock import RealClock
 from softplc.config import load_config
-from softplc.hmi.server import HmiServer
-from softplc.hmi.settings import HmiSettings
+from softplc.adapters.hmi.server import HmiServer
+from softplc.adapters.hmi.settings import HmiSettings
 from softplc.app.runtime import Runtime
 
 PLANT = textwrap.dedent("""

@@ -22,8 +22,8 @@ import pytest_asyncio
 
 from softplc.core.clock import RealClock
 from softplc.config import load_config
-from softplc.hmi.server import HmiServer
-from softplc.hmi.settings import HmiSettings
+from softplc.adapters.hmi.server import HmiServer
+from softplc.adapters.hmi.settings import HmiSettings
 from softplc.core.program import InOut, Input, Output, Program
 from softplc.core.roles import Role
 from softplc.app.runtime import Runtime
@@ -234,12 +234,12 @@ async def start_plant(folder: Path, *, text: str | None = None, modbus: bool = F
     runtime = Runtime(config, clock or RealClock(), state_dir=state)
     adapters: dict[str, Any] = {}
     if opcua:
-        from softplc.opcua import OpcUaServer, OpcUaSettings
+        from softplc.adapters.opcua import OpcUaServer, OpcUaSettings
 
         adapters["opcua"] = OpcUaServer(OpcUaSettings(endpoint="opc.tcp://127.0.0.1:0/softplc/"))
     if modbus:
-        from softplc.modbus.server import ModbusAdapter
-        from softplc.modbus.settings import ModbusSettings
+        from softplc.adapters.modbus.server import ModbusAdapter
+        from softplc.adapters.modbus.settings import ModbusSettings
 
         adapters["modbus"] = ModbusAdapter(config, ModbusSettings(enabled=True, port=0))
     hmi = HmiServer(config, HmiSettings.from_config(config).override(**settings))

@@ -18,8 +18,8 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from softplc.core.clock import RealClock
 from softplc.config import load_config
-from softplc.modbus.server import ModbusAdapter
-from softplc.modbus.settings import ModbusSettings
+from softplc.adapters.modbus.server import ModbusAdapter
+from softplc.adapters.modbus.settings import ModbusSettings
 from softplc.core.program import Input, Output, Program
 from softplc.app.runtime import Runtime
 

@@ -15,9 +15,9 @@ from asyncua import Client
 from softplc import InOut, Input, Output, Program
 from softplc.core.clock import Clock, RealClock
 from softplc.config import load_config
-from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
+from softplc.adapters.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.protocols.opcua_client import ClientCertificate, ensure_client_certificate, pem_certificate
-from softplc.opcua.history import HistoryProvider
+from softplc.adapters.opcua.history import HistoryProvider
 from softplc.app.runtime import Runtime
 
 PASSWORDS = {"viewer": "viewer-pass-1", "operator": "operator-pass-1", "engineer": "engineer-pass-1"}

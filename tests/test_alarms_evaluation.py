@@ -6,7 +6,7 @@ import itertools
 
 import pytest
 
-from softplc.alarms.evaluation import compile_condition
+from softplc.adapters.alarms.evaluation import compile_condition
 from softplc.core.datatypes import DataType
 from softplc.core.expression import Condition
 from softplc.core.tagdb import TagDatabase

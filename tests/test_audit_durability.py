@@ -22,10 +22,10 @@ from pathlib import Path
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from softplc.audit.queries import AuditQuery, search
+from softplc.adapters.audit.queries import AuditQuery, search
 from softplc.config import load_config
-from softplc.modbus.server import ModbusAdapter
-from softplc.modbus.settings import ModbusSettings
+from softplc.adapters.modbus.server import ModbusAdapter
+from softplc.adapters.modbus.settings import ModbusSettings
 from softplc.storage import Database, StorageSettings
 
 from conftest import REPO

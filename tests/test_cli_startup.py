@@ -84,14 +84,14 @@ def test_check_imports_what_the_adapters_need_and_no_more() -> None:
 
 def test_choices_copied_for_a_light_parser_match_their_source() -> None:
     from softplc.clients.robot_agent import agent
-    from softplc.fleet import cli as fleet_cli
-    from softplc.opcua import cli as opcua_cli
+    from softplc.adapters.fleet import cli as fleet_cli
+    from softplc.adapters.opcua import cli as opcua_cli
     from softplc.core import roles
     assert opcua_cli.ROLE_NAMES == roles.ROLE_NAMES
     assert fleet_cli.AGENT_NAMESPACE == agent.DEFAULT_NAMESPACE
 
 
-@pytest.mark.parametrize("package", ["softplc", "softplc.fleet", "softplc.opcua", "softplc.scenarios"])
+@pytest.mark.parametrize("package", ["softplc", "softplc.adapters.fleet", "softplc.adapters.opcua", "softplc.scenarios"])
 def test_packages_export_every_public_name(package: str) -> None:
     module = importlib.import_module(package)
     for name in module.__all__:

@@ -156,8 +156,8 @@ def test_owners_cannot_claim_the_same_section_or_key_or_a_core_one() -> None:
 
 def test_an_owner_adds_tags_to_the_runtime_like_the_system_tags(with_notebook, tmp_path: Path, capsys) -> None:
     from softplc.core.clock import SimClock
-    from softplc.modbus.address_map import Table, build_address_map
-    from softplc.modbus.settings import ModbusSettings
+    from softplc.adapters.modbus.address_map import Table, build_address_map
+    from softplc.adapters.modbus.settings import ModbusSettings
     from softplc.app.runtime import Runtime
 
     path = tmp_path / "plant.yaml"

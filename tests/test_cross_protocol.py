@@ -15,9 +15,9 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from softplc.core.clock import RealClock
 from softplc.config import load_config
-from softplc.modbus.server import ModbusAdapter
-from softplc.modbus.settings import ModbusSettings
-from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
+from softplc.adapters.modbus.server import ModbusAdapter
+from softplc.adapters.modbus.settings import ModbusSettings
+from softplc.adapters.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.app.runtime import Runtime
 
 PLANT = """

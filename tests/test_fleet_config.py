@@ -10,7 +10,7 @@ import pytest
 
 from softplc.app.cli import main
 from softplc.config import load_config
-from softplc.fleet import Compatibility, Hardware, compatibility_matrix, compatible, load_robots, load_tasks
+from softplc.adapters.fleet import Compatibility, Hardware, compatibility_matrix, compatible, load_robots, load_tasks
 from softplc.robotics.robots import DriverKind, parse_robots, parse_tasks
 from softplc.config.yamlsource import ConfigError
 

@@ -10,7 +10,7 @@ import pytest
 
 from softplc.core.clock import SimClock
 from softplc.config import load_config
-from softplc.fleet.adapter import FleetAdapter
+from softplc.adapters.fleet.adapter import FleetAdapter
 from softplc.robotics.gridmap import OccupancyGrid, load_map
 from softplc.robotics.loop import Sample
 from softplc.app.runtime import AdapterError, Runtime

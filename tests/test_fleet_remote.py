@@ -18,10 +18,10 @@ import pytest
 
 from softplc.core.clock import RealClock
 from softplc.config import load_config
-from softplc.fleet.adapter import FleetAdapter
+from softplc.adapters.fleet.adapter import FleetAdapter
 from softplc.robotics.gridmap import load_map
 from softplc.robotics.robots import load_robots
-from softplc.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
+from softplc.adapters.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.app.runtime import Runtime
 from softplc.core.tags import Quality
 
@@ -140,7 +140,7 @@ def make_certificate(directory: Path, name: str) -> tuple[Path, Path, bytes]:
 
 
 async def test_remote_agent_logs_in_with_its_certificate_over_an_encrypted_channel(plant: Path) -> None:
-    from softplc.opcua import Pki
+    from softplc.adapters.opcua import Pki
     from softplc.security.certificates import fingerprint
 
     state = plant.parent / "state"
@@ -201,7 +201,7 @@ async def test_an_agent_for_a_robot_the_runtime_drives_itself_is_refused(plant: 
             assert "refused robot r02: the runtime drives robot r02 itself (driver: sim in" in output
             assert "declare it 'driver: remote' there" in output and "Traceback" not in output
         assert fleet.refusals["r02"].refused == 2
-        lines = [r for r in caplog.records if r.name == "softplc.fleet.remote" and "refused a robot agent" in r.getMessage()]
+        lines = [r for r in caplog.records if r.name == "softplc.adapters.fleet.remote" and "refused a robot agent" in r.getMessage()]
         assert len(lines) == 1 and lines[0].levelname == "ERROR"
         assert db.value("r02_report") == ""  # the refused agent never drove (it would report every cycle)
         # the runtime's own r02 still drives

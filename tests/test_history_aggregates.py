@@ -8,8 +8,8 @@ from typing import Any
 
 import pytest
 
-from softplc.history.aggregates import Aggregate, AggregateConfig, Flags, Result, intervals
-from softplc.history.reads import InvalidContinuation, read_processed, read_raw
+from softplc.adapters.history.aggregates import Aggregate, AggregateConfig, Flags, Result, intervals
+from softplc.adapters.history.reads import InvalidContinuation, read_processed, read_raw
 from softplc.storage import StorageSettings
 from softplc.core.tags import Quality
 from tests.test_history_store import T0, Store
@@ -187,7 +187,7 @@ def test_continuations_are_checked_and_processed_reads_go_on_page_by_page(store:
 
 
 def test_a_read_without_a_limit_comes_in_pages_of_max_values(store: Store) -> None:
-    from softplc.history.reads import MAX_VALUES
+    from softplc.adapters.history.reads import MAX_VALUES
 
     store.write([("level", T0 + t * 0.1, float(t), GOOD) for t in range(2 * MAX_VALUES + 5)])
     sizes, token, seen_values = [], None, []

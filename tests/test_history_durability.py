@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from softplc.history.queries import HistoryReader
+from softplc.adapters.history.queries import HistoryReader
 from softplc.storage import Database, StorageError, StorageSettings
 
 from conftest import REPO

@@ -11,8 +11,8 @@ import pytest
 from softplc.app.adapters import build_adapters
 from softplc.core.clock import SimClock
 from softplc.config import load_config
-from softplc.history.queries import HistoryReader
-from softplc.history.settings import SIM_FILE
+from softplc.adapters.history.queries import HistoryReader
+from softplc.adapters.history.settings import SIM_FILE
 from softplc.app.runtime import Runtime
 from softplc.storage import Database, StorageSettings
 from softplc.core.tags import Quality
@@ -162,7 +162,7 @@ def test_a_partition_of_zero_is_refused_like_the_audit_trails(make_config) -> No
 
 
 def test_rules_merge_in_order_and_a_tags_own_rule_comes_last(make_config) -> None:
-    from softplc.history.settings import HistorySettings, tag_rule
+    from softplc.adapters.history.settings import HistorySettings, tag_rule
 
     config = make_config("""\
         version: 1
@@ -185,7 +185,7 @@ def test_rules_merge_in_order_and_a_tags_own_rule_comes_last(make_config) -> Non
 
 
 def test_the_default_plant_records_its_robot_and_task_tags() -> None:
-    from softplc.history.settings import HistorySettings, problems
+    from softplc.adapters.history.settings import HistorySettings, problems
 
     config = load_config(REPO / "tagdb.yaml")
     assert problems(config) == []
@@ -215,8 +215,8 @@ async def test_a_store_that_cannot_be_opened_stops_the_start_with_the_reason(tmp
 
 
 def test_a_tags_own_history_key_and_its_templates_are_rules(make_config) -> None:
-    from softplc.history.section import tag_rules
-    from softplc.history.settings import HistorySettings
+    from softplc.adapters.history.section import tag_rules
+    from softplc.adapters.history.settings import HistorySettings
     from softplc.config.yamlsource import ConfigError
 
     config = make_config("""\

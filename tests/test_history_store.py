@@ -8,9 +8,9 @@ from typing import Any
 
 import pytest
 
-from softplc.history.aggregates import Aggregate, Sample
-from softplc.history.queries import Continuation, HistoryReader, UnknownTag
-from softplc.history.store import HistorySink, TagInfo
+from softplc.adapters.history.aggregates import Aggregate, Sample
+from softplc.adapters.history.queries import Continuation, HistoryReader, UnknownTag
+from softplc.adapters.history.store import HistorySink, TagInfo
 from softplc.storage import BatchWriter, Database, StorageSettings
 from softplc.core.tags import Quality
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import math
 
-from softplc.history.recorder import TagFilter
-from softplc.history.settings import TagPolicy
-from softplc.history.swinging_door import SwingingDoor
+from softplc.adapters.history.recorder import TagFilter
+from softplc.adapters.history.settings import TagPolicy
+from softplc.adapters.history.swinging_door import SwingingDoor
 from softplc.core.tags import Quality
 
 

@@ -243,7 +243,7 @@ async def test_other_modules_add_pages_banners_and_routes(browser: Any, tmp_path
     """The shell other issues build on: a page in the navigation, a banner on every page, routes of their own."""
     from aiohttp import web
 
-    from softplc.hmi.shell import Page
+    from softplc.adapters.hmi.shell import Page
     from softplc.core.roles import Role
 
     def script(text: str) -> Any:

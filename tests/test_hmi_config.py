@@ -11,7 +11,7 @@ from hmi_support import REPO, plant_yaml, write_plant
 from softplc.app.adapters import build_adapters
 from softplc.app.cli import main
 from softplc.config import load_config
-from softplc.hmi.settings import HmiSettings, hmi_problems
+from softplc.adapters.hmi.settings import HmiSettings, hmi_problems
 from softplc.core.roles import Role
 from softplc.config.yamlsource import ConfigError
 

@@ -1,4 +1,4 @@
-"""Operating through the HMI's commands door (softplc/hmi/command_door.py) and the forced mark on the wire.
+"""Operating through the HMI's commands door (softplc/adapters/hmi/command_door.py) and the forced mark on the wire.
 
 Real HTTP and WebSockets (aiohttp client) against a running runtime: forcing by an engineer, the
 role refusals every path shares (403, reported to the command listeners like any refused call),
@@ -145,8 +145,8 @@ async def test_an_online_change_that_needs_a_restart_is_refused_with_its_details
 
 
 async def test_the_audit_page_exports_csv_for_engineers_only(tmp_path: Path) -> None:
-    from softplc.audit.recorder import AuditRecorder
-    from softplc.audit.settings import AuditSettings
+    from softplc.adapters.audit.recorder import AuditRecorder
+    from softplc.adapters.audit.settings import AuditSettings
 
     plant = await start_plant(tmp_path, start=False)
     plant.runtime.adapters.insert(0, AuditRecorder(AuditSettings(section={"flush_period": "50ms"}), "hmi test plant"))

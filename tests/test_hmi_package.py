@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from hmi_support import REPO
-from softplc.hmi.assets import AssetsNotFound, find_assets
+from softplc.adapters.hmi.assets import AssetsNotFound, find_assets
 
 pytestmark = pytest.mark.slow
 
@@ -24,8 +24,8 @@ SERVE = textwrap.dedent("""
     import softplc
     from softplc.core.clock import RealClock
     from softplc.config import parse_config
-    from softplc.hmi.server import HmiServer
-    from softplc.hmi.settings import HmiSettings
+    from softplc.adapters.hmi.server import HmiServer
+    from softplc.adapters.hmi.settings import HmiSettings
     from softplc.app.runtime import Runtime
 
     async def main():

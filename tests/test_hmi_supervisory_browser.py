@@ -316,7 +316,7 @@ async def test_the_trend_page_says_clearly_when_the_chart_library_is_missing(bro
     front_end = tmp_path / "hmi"
     shutil.copytree(REPO / "hmi", front_end, ignore=shutil.ignore_patterns("node_modules"))  # as built without npm ci
     monkeypatch.setenv("SOFTPLC_HMI_DIR", str(front_end))
-    with caplog.at_level(logging.WARNING, logger="softplc.hmi"):
+    with caplog.at_level(logging.WARNING, logger="softplc.adapters.hmi"):
         plain = await start_supervisory_plant(tmp_path / "plant", modbus=False)
     try:
         assert any("the trend library uPlot is missing" in record.getMessage() for record in caplog.records)

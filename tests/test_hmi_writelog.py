@@ -7,7 +7,7 @@ import logging
 
 import pytest
 
-from softplc.hmi.writelog import WriteLog
+from softplc.adapters.hmi.writelog import WriteLog
 from softplc.core.roles import Role
 from softplc.core.tagdb import Origin, Rule, WriteEvent
 
@@ -17,7 +17,7 @@ ALICE = Origin("hmi", "alice", "127.0.0.1", Role.OPERATOR)
 
 
 async def test_each_write_is_logged_with_its_user_and_a_flood_becomes_one_summary(caplog: pytest.LogCaptureFixture) -> None:
-    caplog.set_level(logging.INFO, logger="softplc.hmi")
+    caplog.set_level(logging.INFO, logger="softplc.adapters.hmi")
     log = WriteLog(interval=0.2, burst=3)
     log([WriteEvent(1.0, ALICE, "t01_iFr", 30.0, 20.0)])
     log([WriteEvent(1.0, ALICE, "limit", 5.0, 1000.0, Rule.OUT_OF_RANGE, "1000.0 is above the maximum 100")])

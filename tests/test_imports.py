@@ -98,8 +98,8 @@ def test_the_graph_sees_every_kind_of_import() -> None:
     graph = import_graph()
     assert "softplc.config.plant" in graph["softplc.config.sections"]  # under TYPE_CHECKING
     assert "softplc.latency.client_process" in graph["softplc.latency.measurement"]  # inside a function
-    assert "softplc.opcua.cli" in graph["softplc.app.cli"]  # COMMAND_MODULES
-    assert "softplc.modbus.section" in graph["softplc.config.sections"]  # SECTION_MODULES
+    assert "softplc.adapters.opcua.cli" in graph["softplc.app.cli"]  # COMMAND_MODULES
+    assert "softplc.adapters.modbus.section" in graph["softplc.config.sections"]  # SECTION_MODULES
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 

@@ -105,7 +105,7 @@ async def test_a_log_record_gets_a_clean_line():
     redraw = asyncio.create_task(bar.redraw(interval=0.01))
     try:
         await until(lambda: bar.drawn)
-        logging.getLogger("softplc.modbus").warning("Modbus client misbehaved (ignored): Cancel send")
+        logging.getLogger("softplc.adapters.modbus").warning("Modbus client misbehaved (ignored): Cancel send")
     finally:
         redraw.cancel()
         await asyncio.gather(redraw, return_exceptions=True)

@@ -166,7 +166,7 @@ async def _serve_handshake(tmp_path: Path, protocol: str) -> tuple[Runtime, str]
     from softplc.app.adapters import build_adapters
 
     if protocol == "opcua":
-        from softplc.opcua import Role, UserStore
+        from softplc.adapters.opcua import Role, UserStore
 
         UserStore(tmp_path / "users.yaml").add("tester", Role.OPERATOR, "handshake-test-password")
         config = handshake_config("fast", 0.01, opcua_endpoint="opc.tcp://127.0.0.1:0/softplc/")
@@ -183,7 +183,7 @@ async def _serve_handshake(tmp_path: Path, protocol: str) -> tuple[Runtime, str]
 async def test_endpoint_opcua_against_a_second_runtime(tmp_path):
     """Signed and encrypted, logged in as an operator, with a client certificate the server trusts."""
     from softplc.latency.certificate import make_client_certificate
-    from softplc.opcua import Pki
+    from softplc.adapters.opcua import Pki
 
     certificate, key = make_client_certificate(tmp_path / "client")
     Pki(tmp_path / "pki").trust(str(certificate))
@@ -224,7 +224,7 @@ def test_the_documented_operator_login_lands_where_the_run_looks(tmp_path):
     import subprocess
 
     from softplc.config import load_config
-    from softplc.opcua import UserStore
+    from softplc.adapters.opcua import UserStore
 
     for name in ("handshake.yaml", "handshake.py"):
         shutil.copy(REPO / "programs" / name, tmp_path / name)

@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 
 from softplc.core.datatypes import TypeMismatch
-from softplc.opcua import OpcUaServer, Pki
+from softplc.adapters.opcua import OpcUaServer, Pki
 from softplc.protocols.opcua_client import ensure_client_certificate
 from softplc.core.roles import Role
 from softplc.app.runtime import Runtime

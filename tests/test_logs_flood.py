@@ -15,7 +15,7 @@ class Clock:
         return self.now
 
 
-def record(message: str, *args: object, logger: str = "softplc.opcua.writes", level: int = logging.INFO) -> logging.LogRecord:
+def record(message: str, *args: object, logger: str = "softplc.adapters.opcua.writes", level: int = logging.INFO) -> logging.LogRecord:
     return logging.LogRecord(logger, level, __file__, 1, message, args, None)
 
 
@@ -28,7 +28,7 @@ def test_a_kind_is_limited_per_interval_and_summarised_when_it_closes() -> None:
     clock.now = 10.0
     assert flood.filter(record("%s: write %s refused: %s", "opcua:anonymous", "y", "no"))  # a new interval
     (summary,) = summaries
-    assert summary.name == "softplc.opcua.writes" and summary.levelno == logging.INFO
+    assert summary.name == "softplc.adapters.opcua.writes" and summary.levelno == logging.INFO
     assert summary.getMessage() == ("35 more lines like this left out in the last 10 s (at most 5 of a kind per 10 s): "
                                     "opcua:anonymous: write x5 refused: no")
 

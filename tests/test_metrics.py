@@ -1,4 +1,4 @@
-"""/metrics (softplc/metrics/): the default plant with every adapter `softplc run` starts, scraped over HTTP.
+"""/metrics (softplc/adapters/metrics/): the default plant with every adapter `softplc run` starts, scraped over HTTP.
 
 The figures are read back with prometheus_client's own parser, and moved by real clients: an
 asyncua session and subscription, pymodbus requests, HMI writes and a force through the HMI's
@@ -25,9 +25,9 @@ from hmi_support import PASSWORDS, add_users, start_plant, wait_until
 from softplc.app.adapters import build_adapters
 from softplc.core.clock import RealClock
 from softplc.config import load_config
-from softplc.metrics.adapter import MetricsAdapter
-from softplc.metrics.histograms import SeriesHistogram
-from softplc.metrics.settings import MetricsSettings
+from softplc.adapters.metrics.adapter import MetricsAdapter
+from softplc.adapters.metrics.histograms import SeriesHistogram
+from softplc.adapters.metrics.settings import MetricsSettings
 from softplc.app.runtime import Runtime
 from softplc.engine.stats import TimingSeries
 

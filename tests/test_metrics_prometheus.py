@@ -19,8 +19,8 @@ import aiohttp
 import pytest
 
 from hmi_support import start_plant
-from softplc.metrics.adapter import MetricsAdapter
-from softplc.metrics.settings import MetricsSettings
+from softplc.adapters.metrics.adapter import MetricsAdapter
+from softplc.adapters.metrics.settings import MetricsSettings
 
 PROMETHEUS = shutil.which("prometheus") or "/usr/bin/prometheus"
 if not os.path.exists(PROMETHEUS):

@@ -9,7 +9,7 @@ from modbus_helpers import mbap, raw_request, start_plant, stop_plant
 from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.constants import ExcCodes
 
-from softplc.modbus.address_map import Table
+from softplc.adapters.modbus.address_map import Table
 from softplc.core.tagdb import Rule
 
 PLANT = """

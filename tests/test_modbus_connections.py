@@ -13,10 +13,10 @@ from modbus_helpers import mbap, start_plant, stop_plant
 
 from softplc.app.cli import main
 from softplc.config import load_config
-from softplc.modbus.connections import EventReport
-from softplc.modbus.settings import ModbusSettings
+from softplc.adapters.modbus.connections import EventReport
+from softplc.adapters.modbus.settings import ModbusSettings
 
-CONNECTIONS_LOGGER = "softplc.modbus.connections"
+CONNECTIONS_LOGGER = "softplc.adapters.modbus.connections"
 
 
 class Peer:

@@ -27,7 +27,7 @@ from conftest import REPO
 from modbus_helpers import mbpoll_path, polled
 
 from softplc.config import load_config
-from softplc.modbus.address_map import Table, build_address_map
+from softplc.adapters.modbus.address_map import Table, build_address_map
 
 DOCS = [REPO / "docs" / "modbus.md", REPO / "README.md"]
 TABLES = {"0": "coil", "1": "discrete_input", "3": "input", "4": "holding"}

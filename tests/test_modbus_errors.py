@@ -9,8 +9,8 @@ import pytest
 from modbus_helpers import mbap, raw_request, start_plant, stop_plant, value_of, words_of
 from pymodbus.constants import ExcCodes
 
-from softplc.modbus.server import ModbusAdapter
-from softplc.modbus.settings import ModbusSettings
+from softplc.adapters.modbus.server import ModbusAdapter
+from softplc.adapters.modbus.settings import ModbusSettings
 from softplc.app.runtime import AdapterError, Runtime
 
 PLANT = """
@@ -174,7 +174,7 @@ async def test_read_write_multiple_and_mask_write_are_validated_too(plant):
 async def test_an_internal_failure_answers_04_and_the_server_keeps_serving(plant, caplog):
     # A runtime-internal writer bypassing validation (db.commit) leaves a value its encoding cannot carry.
     plant.db.commit({"u16": "not a number"})
-    with caplog.at_level(logging.ERROR, logger="softplc.modbus.server"):
+    with caplog.at_level(logging.ERROR, logger="softplc.adapters.modbus.server"):
         response = await plant.client.read_holding_registers(plant.address("u16"), count=1)
     assert exception_code(response) == ExcCodes.DEVICE_FAILURE
     assert "Modbus request (function 3" in caplog.text

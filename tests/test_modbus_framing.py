@@ -20,10 +20,10 @@ from modbus_helpers import mbap, mbpoll_path, polled, raw_request, start_plant, 
 from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
-from softplc.modbus.connections import FRAME_TIMEOUT
-from softplc.modbus.framing import FrameBuffer, FramingError
+from softplc.adapters.modbus.connections import FRAME_TIMEOUT
+from softplc.adapters.modbus.framing import FrameBuffer, FramingError
 
-CONNECTIONS_LOGGER = "softplc.modbus.connections"
+CONNECTIONS_LOGGER = "softplc.adapters.modbus.connections"
 BOUND = 1.0  # s: "at once", with room for a loaded machine (the close takes well under 10 ms)
 
 

@@ -10,7 +10,7 @@ from modbus_helpers import mbap, raw_request, start_plant, stop_plant
 from pymodbus.constants import DeviceInformation, ExcCodes
 
 import softplc
-from softplc.modbus.identification import identification_answer
+from softplc.adapters.modbus.identification import identification_answer
 
 PLANT = """
 version: 1

@@ -12,8 +12,8 @@ import pytest
 
 from softplc.app.cli import main
 from softplc.core.datatypes import DataType
-from softplc.modbus.address_map import Table, build_address_map
-from softplc.modbus.codec import CodecError, RegisterCodec
+from softplc.adapters.modbus.address_map import Table, build_address_map
+from softplc.adapters.modbus.codec import CodecError, RegisterCodec
 from softplc.config.yamlsource import ConfigError
 
 BASE = """
@@ -289,7 +289,7 @@ def test_run_flags_build_or_skip_the_modbus_adapter(make_config, capsys):
 
 def test_system_tags_that_do_not_fit_are_left_out_with_a_warning(make_config, caplog):
     config = make_config(BASE + "tasks:\n  fast: {interval: 10ms}\nservers:\n  modbus: {system_base: 65500}\n")
-    with caplog.at_level("WARNING", logger="softplc.modbus.address_map"):
+    with caplog.at_level("WARNING", logger="softplc.adapters.modbus.address_map"):
         m = build_address_map(config)
     assert "r01_busy" in m.by_tag and "_sys.reset_stats" in m.by_tag  # coils still fit
     assert "_sys.fast.latency_ms_p99" not in m.by_tag

@@ -1,6 +1,6 @@
 """`softplc apply` against a running runtime over OPC UA (a real server, the command in its own process).
 
-It calls `programs.apply` through the OPC UA door to the runtime's commands (softplc/opcua/commands.py).
+It calls `programs.apply` through the OPC UA door to the runtime's commands (softplc/adapters/opcua/commands.py).
 """
 
 from __future__ import annotations

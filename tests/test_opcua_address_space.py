@@ -5,7 +5,7 @@ from __future__ import annotations
 from asyncua import ua
 
 from softplc.core.datatypes import DataType
-from softplc.opcua.address_space import plan_folders
+from softplc.adapters.opcua.address_space import plan_folders
 from softplc.core.tags import TagDef
 from tests.opcua_support import client_for, running_plant
 

@@ -17,8 +17,8 @@ from asyncua import Client, ua
 from softplc.app.cli import main
 from softplc.core.clock import RealClock
 from softplc.config import load_config
-from softplc.opcua import OpcUaServer, OpcUaSettings, UserStore
-from softplc.opcua.settings import SettingsError
+from softplc.adapters.opcua import OpcUaServer, OpcUaSettings, UserStore
+from softplc.adapters.opcua.settings import SettingsError
 from softplc.security.users import verify_password
 from softplc.app.runtime import AdapterError, Runtime
 from tests.conftest import REPO

@@ -11,7 +11,7 @@ import pytest
 import pytest_asyncio
 from asyncua import ua
 
-from softplc.opcua import Role
+from softplc.adapters.opcua import Role
 from softplc.security import logins as logins_module
 from softplc.security.logins import FAILURES_PER_PEER, FAILURES_PER_PEER_AND_USER, LoginThrottle
 from softplc.security.passwords import SCRYPT_LOG2_N, verify_password
@@ -64,7 +64,7 @@ async def test_a_password_flood_on_one_user_locks_out_nobody_else(plant, caplog:
     assert answers and all(answer.value == ua.StatusCodes.BadUserAccessDenied for answer in answers)
     assert logins.hashed - hashed == FAILURES_PER_PEER_AND_USER + 1  # the rest were refused without hashing
     # A few log lines, not one per attempt, and no asyncua error line per refused login.
-    ours = [r for r in caplog.records if r.name.startswith(("softplc.opcua", "softplc.security.logins")) and r.levelno >= logging.WARNING and "login" in r.getMessage()]
+    ours = [r for r in caplog.records if r.name.startswith(("softplc.adapters.opcua", "softplc.security.logins")) and r.levelno >= logging.WARNING and "login" in r.getMessage()]
     assert 1 <= len(ours) <= 2, [r.getMessage() for r in ours]
     assert not [r for r in caplog.records if r.name.startswith("asyncua") and r.levelno >= logging.ERROR]
 

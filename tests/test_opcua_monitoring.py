@@ -12,8 +12,8 @@ import pytest
 import pytest_asyncio
 from asyncua import ua
 
-from softplc.opcua import subscriptions
-from softplc.opcua.subscriptions import TagSubscription
+from softplc.adapters.opcua import subscriptions
+from softplc.adapters.opcua.subscriptions import TagSubscription
 from softplc.core.tags import Quality
 from tests.opcua_support import client_for, running_plant, wait_until
 

@@ -13,7 +13,7 @@ from datetime import datetime
 import pytest
 
 from tests.conftest import REPO
-from softplc.opcua import Pki
+from softplc.adapters.opcua import Pki
 from softplc.security.certificates import fingerprint
 from tests.opcua_support import PASSWORDS, make_client_certificate, running_plant
 

@@ -16,7 +16,7 @@ from asyncua import ua
 from asyncua.ua.ua_binary import struct_from_binary, struct_to_binary, uatcp_to_binary
 
 from softplc.util.peers import PeerLog
-from softplc.opcua.settings import DEFAULT_MAX_MESSAGE_SIZE
+from softplc.adapters.opcua.settings import DEFAULT_MAX_MESSAGE_SIZE
 from tests.opcua_support import client_for, running_plant, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
@@ -214,7 +214,7 @@ def _warnings(caplog: pytest.LogCaptureFixture, text: str) -> list[str]:
 
 def _fresh_peer_log(server) -> None:
     """Forget what earlier tests logged (a peer's kind of line is logged once per 10 s)."""
-    server.server.bserver.peer_log = PeerLog(logging.getLogger("softplc.opcua.transport"))
+    server.server.bserver.peer_log = PeerLog(logging.getLogger("softplc.adapters.opcua.transport"))
 
 
 async def _first_frame_type(reader: asyncio.StreamReader, timeout: float) -> bytes | None:

@@ -13,7 +13,7 @@ import pytest
 import pytest_asyncio
 from asyncua import Client, ua
 
-from softplc.opcua import Pki, Role, UserStore
+from softplc.adapters.opcua import Pki, Role, UserStore
 from softplc.security.certificates import fingerprint
 from tests.conftest import REPO
 from softplc.protocols.opcua_client import make_client

@@ -8,7 +8,7 @@ import pytest_asyncio
 from asyncua import ua
 from asyncua.common.subscription import DataChangeNotif
 
-from softplc.opcua.units import unit_id
+from softplc.adapters.opcua.units import unit_id
 from softplc.core.tags import Quality
 from tests.opcua_support import PASSWORDS, client_for, running_plant, wait_until
 

@@ -12,7 +12,7 @@ import pytest_asyncio
 from asyncua import ua
 
 from softplc.core.clock import SimClock
-from softplc.opcua.history import HistoryPage, Sample
+from softplc.adapters.opcua.history import HistoryPage, Sample
 from softplc.core.tags import Quality
 from tests.opcua_support import client_for, running_plant, wait_until
 

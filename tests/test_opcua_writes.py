@@ -14,9 +14,9 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from softplc.core.clock import RealClock
 from softplc.config import load_config
-from softplc.modbus.server import ModbusAdapter
-from softplc.modbus.settings import ModbusSettings
-from softplc.opcua import OpcUaServer, OpcUaSettings
+from softplc.adapters.modbus.server import ModbusAdapter
+from softplc.adapters.modbus.settings import ModbusSettings
+from softplc.adapters.opcua import OpcUaServer, OpcUaSettings
 from softplc.app.runtime import Runtime
 from softplc.core.tagdb import WriteEvent
 from tests.opcua_support import add_users, client_for, running_plant, wait_until

@@ -231,9 +231,9 @@ async def test_a_stall_is_on_the_console_at_once_and_over_the_protocols_once_the
     from asyncua.sync import Client as SyncOpcUaClient
     from pymodbus.client import ModbusTcpClient
 
-    from softplc.modbus.server import ModbusAdapter
-    from softplc.modbus.settings import ModbusSettings
-    from softplc.opcua import OpcUaServer, OpcUaSettings
+    from softplc.adapters.modbus.server import ModbusAdapter
+    from softplc.adapters.modbus.settings import ModbusSettings
+    from softplc.adapters.opcua import OpcUaServer, OpcUaSettings
 
     config = make_config(STALL)
     modbus = ModbusAdapter(config, ModbusSettings(**{**ModbusSettings.from_servers(config.servers).__dict__, "enabled": True, "port": 0}))

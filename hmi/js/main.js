@@ -3,7 +3,7 @@
 //
 // A page is an ES module exporting `mount(root, context)` that returns an unmount function;
 // `context` = {live, session, params, openWrite(meta, preset), openDetails(title, tags, subtitle),
-// navigate(hash)}. Other modules add pages, banners and API routes on the server (softplc/hmi/shell.py).
+// navigate(hash)}. Other modules add pages, banners and API routes on the server (softplc/adapters/hmi/shell.py).
 
 import { el, clear, setText } from './dom.js';
 import { get, post, setCsrf, forgetMeta } from './api.js';

@@ -18,30 +18,30 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from softplc.config import PlantConfig
-    from softplc.modbus.settings import ModbusSettings
-    from softplc.opcua.settings import OpcUaSettings
+    from softplc.adapters.modbus.settings import ModbusSettings
+    from softplc.adapters.opcua.settings import OpcUaSettings
     from softplc.app.runtime import Adapter
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     """Flags of `softplc run` that belong to adapters."""
     group = parser.add_argument_group("servers")
     group.add_argument("--no-servers", action="store_true", help="start no protocol server (scan only)")
-    # Modbus TCP (softplc.modbus)
-    from softplc.modbus.settings import host_name as modbus_host
-    from softplc.modbus.settings import port_number as modbus_port
+    # Modbus TCP (softplc.adapters.modbus)
+    from softplc.adapters.modbus.settings import host_name as modbus_host
+    from softplc.adapters.modbus.settings import port_number as modbus_port
 
     group.add_argument("--modbus-host", type=modbus_host, metavar="HOST", help="Modbus TCP bind address (default servers.modbus.host, 127.0.0.1)")
     group.add_argument("--modbus-port", type=modbus_port, metavar="PORT", help="Modbus TCP port (default servers.modbus.port, 5020; 0 = any free port, the default under --sim)")
     group.add_argument("--no-modbus", action="store_true", help="do not start the Modbus TCP server")
-    # OPC UA (softplc.opcua)
+    # OPC UA (softplc.adapters.opcua)
     group.add_argument("--opcua-endpoint", metavar="URL", help="OPC UA endpoint, e.g. opc.tcp://0.0.0.0:4840/softplc/ (default servers.opcua.endpoint; port 0 = any free port, the default under --sim)")
     group.add_argument("--opcua-security", metavar="LIST", help="comma-separated policies: None, Basic256Sha256_Sign, Basic256Sha256_SignAndEncrypt")
     group.add_argument("--opcua-anonymous", choices=("off", "viewer"), help="anonymous OPC UA sessions: refused, or read-only")
     group.add_argument("--opcua-users", type=Path, metavar="FILE", help="OPC UA users file (default servers.opcua.users_file, STATE_DIR/users.yaml)")
     group.add_argument("--no-opcua", action="store_true", help="do not start the OPC UA server")
-    # Web HMI (softplc.hmi)
-    from softplc.hmi.settings import host_name as hmi_host
-    from softplc.hmi.settings import port_number as hmi_port
+    # Web HMI (softplc.adapters.hmi)
+    from softplc.adapters.hmi.settings import host_name as hmi_host
+    from softplc.adapters.hmi.settings import port_number as hmi_port
 
     hmi = parser.add_argument_group("web HMI")
     hmi.add_argument("--hmi-host", type=hmi_host, metavar="HOST", help="HMI bind address (default servers.hmi.host, 127.0.0.1)")
@@ -50,13 +50,13 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     hmi.add_argument("--hmi-tls", action="store_true", default=None, help="serve the HMI over HTTPS (certificate made in STATE_DIR/hmi/tls)")
     hmi.add_argument("--hmi-open", action="store_true", help="open the HMI in a browser once it serves (when there is a screen)")
     hmi.add_argument("--no-hmi", action="store_true", help="do not start the web HMI")
-    # Robot fleet (softplc.fleet)
+    # Robot fleet (softplc.adapters.fleet)
     robots = parser.add_argument_group("robots")
     robots.add_argument("--no-fleet", action="store_true", help="do not drive the robots of the fleet: section")
-    # Historian (softplc.history)
+    # Historian (softplc.adapters.history)
     history = parser.add_argument_group("history")
     history.add_argument("--no-history", action="store_true", help="record no history (the history: section)")
-    # Audit trail (softplc.audit)
+    # Audit trail (softplc.adapters.audit)
     audit = parser.add_argument_group("audit trail")
     audit.add_argument("--no-audit", action="store_true", help="keep no audit trail of writes and commands for this run (the audit: section)")
 
@@ -116,7 +116,7 @@ def servers_off(config: PlantConfig, args: argparse.Namespace | None = None) -> 
     if getattr(args, "no_hmi", False):
         off.append("the web HMI (--no-hmi)")
     else:
-        from softplc.hmi.settings import HmiSettings
+        from softplc.adapters.hmi.settings import HmiSettings
 
         if not HmiSettings.from_config(config).enabled:
             off.append(f"the web HMI (servers.hmi.enabled: false in {config.path.name}): set enabled: true to serve it")
@@ -124,7 +124,7 @@ def servers_off(config: PlantConfig, args: argparse.Namespace | None = None) -> 
 
 
 def _modbus_settings(config: PlantConfig, args: argparse.Namespace | None) -> ModbusSettings:
-    from softplc.modbus.settings import ModbusSettings
+    from softplc.adapters.modbus.settings import ModbusSettings
 
     settings = ModbusSettings.from_servers(config.servers).override(
         host=getattr(args, "modbus_host", None),
@@ -139,13 +139,13 @@ def _modbus(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapte
     settings = _modbus_settings(config, args)
     if not settings.enabled:  # its section, pinned addresses included, was checked with the configuration
         return []
-    from softplc.modbus.server import ModbusAdapter
+    from softplc.adapters.modbus.server import ModbusAdapter
 
     return [ModbusAdapter(config, settings)]
 
 
 def _opcua_settings(config: PlantConfig, args: argparse.Namespace | None) -> OpcUaSettings:
-    from softplc.opcua.settings import OpcUaSettings, SettingsError
+    from softplc.adapters.opcua.settings import OpcUaSettings, SettingsError
     from softplc.config.yamlsource import ConfigError
 
     try:
@@ -170,62 +170,62 @@ def _opcua(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter
     settings = _opcua_settings(config, args)
     if not settings.enabled or bool(getattr(args, "no_opcua", False)):
         return []
-    from softplc.opcua.server import OpcUaServer
+    from softplc.adapters.opcua.server import OpcUaServer
 
     return [OpcUaServer(settings)]
 
 
 def _alarms(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
-    from softplc.alarms.settings import AlarmSettings, configured
+    from softplc.adapters.alarms.settings import AlarmSettings, configured
 
     if not configured(config):
         return []
-    from softplc.alarms.adapter import AlarmsAdapter
+    from softplc.adapters.alarms.adapter import AlarmsAdapter
 
     return [AlarmsAdapter(AlarmSettings.from_config(config))]  # ConfigError: located problems of alarms:
 
 
 def _fleet(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
-    from softplc.fleet.settings import FleetSettings
+    from softplc.adapters.fleet.settings import FleetSettings
 
     if not FleetSettings.configured(config) or bool(getattr(args, "no_fleet", False)):
         return []
     if not FleetSettings.from_config(config).enabled:
         return []
-    from softplc.fleet.adapter import FleetAdapter
+    from softplc.adapters.fleet.adapter import FleetAdapter
 
     return [FleetAdapter.from_config(config)]
 
 
 def _audit(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
-    from softplc.audit.settings import AuditSettings
+    from softplc.adapters.audit.settings import AuditSettings
 
-    settings = AuditSettings.from_config(config)  # checked by its section owner (softplc.audit.section)
+    settings = AuditSettings.from_config(config)  # checked by its section owner (softplc.adapters.audit.section)
     if not settings.enabled or bool(getattr(args, "no_audit", False)):
         return []
-    from softplc.audit.recorder import AuditRecorder
+    from softplc.adapters.audit.recorder import AuditRecorder
 
     return [AuditRecorder(settings, config.name)]
 
 
-# -- historian (softplc.history) ----------------------------------------------------
+# -- historian (softplc.adapters.history) ----------------------------------------------------
 
 
 def _history(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
-    from softplc.history.section import tag_rules
-    from softplc.history.settings import HistorySettings
+    from softplc.adapters.history.section import tag_rules
+    from softplc.adapters.history.settings import HistorySettings
     from softplc.engine.systags import runtime_tag_definitions
 
     rules = tag_rules(config)
     if not HistorySettings.configured(config) and not rules:
         return []
     definitions = [*config.tags, *runtime_tag_definitions(config)]
-    settings = HistorySettings.from_config(config, rules)  # checked by its section owner (softplc.history.section)
+    settings = HistorySettings.from_config(config, rules)  # checked by its section owner (softplc.adapters.history.section)
     if not settings.enabled or bool(getattr(args, "no_history", False)):
         return []
     if bool(getattr(args, "sim", False)) and not settings.sim:
         return []
-    from softplc.history.recorder import HistoryRecorder
+    from softplc.adapters.history.recorder import HistoryRecorder
 
     policies = settings.policies(definitions)
     types = {d.name: (d.type.value, d.unit) for d in definitions if d.name in policies}
@@ -233,7 +233,7 @@ def _history(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapt
 
 
 def _hmi(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
-    from softplc.hmi.settings import HmiSettings  # its sections are checked by their owner (softplc.hmi.section)
+    from softplc.adapters.hmi.settings import HmiSettings  # its sections are checked by their owner (softplc.adapters.hmi.section)
 
     settings = HmiSettings.from_config(config).override(
         host=getattr(args, "hmi_host", None),
@@ -247,13 +247,13 @@ def _hmi(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
         settings = dataclasses.replace(settings, port=port)
     if not settings.enabled or bool(getattr(args, "no_hmi", False)):
         return []
-    from softplc.hmi.server import HmiServer
-    from softplc.metrics.settings import MetricsSettings
+    from softplc.adapters.hmi.server import HmiServer
+    from softplc.adapters.metrics.settings import MetricsSettings
 
     hmi = HmiServer(config, settings)
     metrics = MetricsSettings.from_config(config)
     if not metrics.enabled:
         return [hmi]
-    from softplc.metrics.adapter import MetricsAdapter
+    from softplc.adapters.metrics.adapter import MetricsAdapter
 
     return [MetricsAdapter(hmi, metrics), hmi]  # /metrics on the HMI's server; ready before it listens

@@ -38,8 +38,8 @@ EXIT_RETAIN_CORRUPT = 3  # `softplc run`: retain.sqlite is corrupt; nothing star
 DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules that add subcommands (each defines add_commands(subparsers)).
-COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.cli", "softplc.scenarios.cli", "softplc.latency.cli", "softplc.opcua.cli", "softplc.fleet.cli",
-                                   "softplc.history.export", "softplc.clients.alarms.cli", "softplc.clients.tags.cli", "softplc.clients.apply.cli",
+COMMAND_MODULES: tuple[str, ...] = ("softplc.adapters.modbus.cli", "softplc.svm.cli", "softplc.scenarios.cli", "softplc.latency.cli", "softplc.adapters.opcua.cli", "softplc.adapters.fleet.cli",
+                                   "softplc.adapters.history.cli", "softplc.clients.alarms.cli", "softplc.clients.tags.cli", "softplc.clients.apply.cli",
                                    "softplc.clients.audit.cli")
 
 log = logging.getLogger("softplc")

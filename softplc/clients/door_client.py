@@ -2,7 +2,7 @@
 
     result = await call_command(client, namespace_index, "tags.force", {"tag": "t01_iFr", "value": "0"})
 
-The door is served by softplc/opcua/commands.py: `Call(name, argumentsJSON) -> resultJSON`, where
+The door is served by softplc/adapters/opcua/commands.py: `Call(name, argumentsJSON) -> resultJSON`, where
 resultJSON is {"ok": true, "result": ...} or {"ok": false, "error": "the runtime's reason"}. Every
 client command (read/write/force..., apply, alarms, audit --endpoint) calls the runtime this way,
 and gets one error type back whatever went wrong: `CommandError`, whose `kind` says why.
@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # asyncua is imported when a command runs: `softplc --help` must not load it
     from asyncua import Client
 
-COMMANDS_OBJECT = "Commands"  # = softplc.opcua.commands.COMMANDS_OBJECT (that module needs the server side)
+COMMANDS_OBJECT = "Commands"  # = softplc.adapters.opcua.commands.COMMANDS_OBJECT (that module needs the server side)
 NOT_ALLOWED = "not_allowed"  # the session's role may not call it (BadUserAccessDenied)
 NO_DOOR = "no_door"  # the server has no Objects/Commands: no softplc, or one older than the door
 REFUSED = "refused"  # the runtime refused it, in its own words (or the server answered another bad status)

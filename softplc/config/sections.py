@@ -30,13 +30,13 @@ if TYPE_CHECKING:
 # pymodbus, numpy and the like at module level (tests/test_config_sections.py checks it).
 SECTION_MODULES: tuple[str, ...] = (
     "softplc.engine.section",
-    "softplc.opcua.section",
-    "softplc.modbus.section",
-    "softplc.fleet.section",
-    "softplc.history.section",
-    "softplc.alarms.section",
-    "softplc.hmi.section",
-    "softplc.audit.section",
+    "softplc.adapters.opcua.section",
+    "softplc.adapters.modbus.section",
+    "softplc.adapters.fleet.section",
+    "softplc.adapters.history.section",
+    "softplc.adapters.alarms.section",
+    "softplc.adapters.hmi.section",
+    "softplc.adapters.audit.section",
 )
 
 

@@ -1,4 +1,4 @@
-"""The scenario's link to the robot fleet (`softplc.fleet`): compatibility and simulated robots.
+"""The scenario's link to the robot fleet (`softplc.adapters.fleet`): compatibility and simulated robots.
 
 Robots are specified in a scenario with the thesis's Table 6/7 values, which decide what
 they may serve. They are *driven* as the thesis's Stage robots were: TurtleBots (0.255 m
@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from softplc.config import PlantConfig
-from softplc.fleet.adapter import FleetAdapter
+from softplc.adapters.fleet.adapter import FleetAdapter
 from softplc.robotics.compat import compatible_tasks as compatible
 from softplc.robotics.floor import Floor
 from softplc.robotics.gridmap import load_map

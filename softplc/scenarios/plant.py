@@ -70,7 +70,7 @@ PLANT_INTERVAL = "100ms"
 
 def robot_tags() -> dict[str, dict[str, Any]]:
     """The case-study robot tags plus every tag the fleet adapter needs."""
-    from softplc.fleet.adapter import REQUIRED_TAGS
+    from softplc.adapters.fleet.adapter import REQUIRED_TAGS
 
     try:
         default_plant, _ = load_yaml(PROJECT / "tagdb.yaml")

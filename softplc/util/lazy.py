@@ -1,9 +1,9 @@
 """Lazy re-exports for a package's `__init__` (PEP 562): public names load their module on first use.
 
 `softplc --help` imports the command modules of every package and must not load asyncua, scipy
-or pymodbus with them, yet `from softplc.opcua import OpcUaServer` should keep working.
+or pymodbus with them, yet `from softplc.adapters.opcua import OpcUaServer` should keep working.
 
-    __getattr__, __dir__ = lazy_exports(__name__, {"softplc.opcua.server": ("OpcUaServer",), ...})
+    __getattr__, __dir__ = lazy_exports(__name__, {"softplc.adapters.opcua.server": ("OpcUaServer",), ...})
 """
 
 from __future__ import annotations

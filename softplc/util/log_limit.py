@@ -3,7 +3,7 @@
 Every line a client can cause — a refused write, a failed login, a refused certificate, a bad
 Modbus frame, a robot agent's bad report, asyncua's own complaints — goes through the handlers
 `softplc.util.logs` installs, and each handler has a `FloodFilter`: the first `burst` lines of one
-*kind* (logger name + message template, e.g. `softplc.opcua.writes` + `"%s: write %s refused:
+*kind* (logger name + message template, e.g. `softplc.adapters.opcua.writes` + `"%s: write %s refused:
 %s"`) within `interval` seconds are written, the others counted, and when the interval is over
 one summary line says how many were left out. A steady flood thus writes `burst` + 1 lines per
 interval and kind. One logger may write at most `logger_burst` lines per interval whatever

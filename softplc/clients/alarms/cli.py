@@ -195,7 +195,7 @@ def cmd_journal(args: argparse.Namespace) -> int:
                 json.dump(rows, stream, indent=2)
                 stream.write("\n")
             else:
-                from softplc.alarms.journal import entries_from_dicts, write_csv
+                from softplc.adapters.alarms.journal import entries_from_dicts, write_csv
 
                 write_csv(entries_from_dicts(rows), stream)
         finally:

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from softplc.audit.commands import parse_time as parse_absolute
+from softplc.adapters.audit.commands import parse_time as parse_absolute
 from softplc.core.commands import CommandRefused
 from softplc.clients.login import LoginError, add_login_arguments, login_from_args
 
@@ -127,9 +127,9 @@ def _time(text: str | None, option: str, now: float) -> float | None:
 
 
 def _local(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
-    from softplc.audit.commands import query_from_arguments
-    from softplc.audit.queries import MAX_ROWS, AuditQuery, search
-    from softplc.audit.settings import AuditSettings
+    from softplc.adapters.audit.commands import query_from_arguments
+    from softplc.adapters.audit.queries import MAX_ROWS, AuditQuery, search
+    from softplc.adapters.audit.settings import AuditSettings
     from softplc.config import load_config
     from softplc.storage import Database
     from softplc.storage.database import driver_errors
@@ -213,7 +213,7 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
 
 
 def _show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> None:
-    from softplc.audit.entry import AuditEntry, format_value
+    from softplc.adapters.audit.entry import AuditEntry, format_value
 
     stream = args.output.open("w", newline="", encoding="utf-8") if args.output else sys.stdout
     try:
@@ -221,7 +221,7 @@ def _show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> None:
             json.dump(rows, stream, indent=1, ensure_ascii=False, default=str)
             stream.write("\n")
         elif args.format == "csv":
-            from softplc.audit.queries import write_csv
+            from softplc.adapters.audit.queries import write_csv
 
             write_csv((AuditEntry.from_dict(row) for row in rows), stream)
         elif rows:
@@ -242,7 +242,7 @@ def _show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> None:
 def _what(row: dict[str, Any]) -> str:
     if row["kind"] == "write":
         return row["name"]
-    from softplc.audit.entry import format_value
+    from softplc.adapters.audit.entry import format_value
 
     arguments = row["arguments"] if isinstance(row["arguments"], dict) else {}
     shown = [row["tag"]] if row["tag"] else []

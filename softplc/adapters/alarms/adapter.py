@@ -1,0 +1,133 @@
+"""The alarms adapter: runs the engine at scan boundaries, keeps the journal and the summary tags.
+
+Built by `softplc.app.adapters` from the `alarms:` section. Under `run --sim` the journal is a
+SQLite file of its own (STATE_DIR/alarms-sim.sqlite, emptied at each start, timestamps in
+simulated time), never the real plant's journal.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from softplc.adapters.alarms.actions import AlarmActions
+from softplc.adapters.alarms.commands import register_alarm_commands
+from softplc.adapters.alarms.engine import AlarmEngine
+from softplc.adapters.alarms.journal import AlarmJournal, JournalSink
+from softplc.adapters.alarms.settings import AlarmSettings
+from softplc.adapters.alarms.summary import SummaryTags
+from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
+from softplc.core.tagdb import Origin
+
+if TYPE_CHECKING:
+    from softplc.app.runtime import Runtime
+
+log = logging.getLogger(__name__)
+
+JOURNAL_FILE = "alarms.sqlite"
+SIM_JOURNAL_FILE = "alarms-sim.sqlite"
+IDLE_TICK = 0.1  # evaluation period of a plant without tasks (no scan boundaries)
+
+
+class AlarmsAdapter:
+    """The alarm engine around the core (see the module docstring)."""
+
+    name = "alarms"
+
+    def __init__(self, settings: AlarmSettings) -> None:
+        self.settings = settings
+        self.engine: AlarmEngine | None = None
+        self.actions: AlarmActions | None = None
+        self.journal: AlarmJournal | None = None
+        self.storage: StorageSettings | None = None
+        self._writer: BatchWriter | None = None
+        self._summary: SummaryTags | None = None
+        self._undo: list[Callable[[], None]] = []
+        self._running = False
+
+    async def start(self, runtime: Runtime) -> None:
+        engine = AlarmEngine(self.settings, runtime.db, runtime.clock, runtime.events.publish)
+        self.engine, self.actions = engine, AlarmActions(engine)
+        self.journal = await self._open_journal(runtime)
+        undo = self._undo
+        undo.append(runtime.events.subscribe(self.journal.record, kinds=("alarm",)))
+        undo.extend(register_alarm_commands(runtime.commands, engine, self.actions, self.journal, runtime.clock))
+        commands = runtime.commands
+
+        async def acknowledge_all(origin: Origin) -> Any:
+            return await commands.call("alarms.acknowledge_all", {"comment": "acknowledge-all tag"}, origin)
+
+        self._summary = SummaryTags(runtime.db, acknowledge_all)
+        undo.append(runtime.db.on_change(engine.note_changed))
+        undo.append(runtime.db.on_write(self._summary.note_writes))
+        self._running = True
+        if runtime.tasks:
+            runtime.engine.after_cycle(self._after_cycle)  # no unsubscribe: _running gates it
+        else:
+            runtime.spawn(self._tick(runtime), "alarms")
+        log.info("alarms: %d defined; journal in %s", len(engine.alarms), self.storage.describe() if self.storage else "-")
+
+    async def _open_journal(self, runtime: Runtime) -> AlarmJournal:
+        if runtime.clock.simulated:
+            path = Path(runtime.state_dir) / SIM_JOURNAL_FILE
+            remove_sqlite_store(path)
+            storage = StorageSettings.sqlite(path)
+        else:
+            storage = StorageSettings.from_section(self.settings.journal, Path(runtime.state_dir), JOURNAL_FILE)
+        self.storage = storage
+        database = Database(storage)
+        writer = BatchWriter(database, name="alarm-journal")
+        writer.register(JournalSink(self.settings.retention, runtime.clock.wall))
+        error = await asyncio.to_thread(writer.start)
+        if error is not None:  # the writer keeps the rows and retries: alarms work without the store
+            log.error("alarm journal: cannot open %s: %s; retrying, rows are kept meanwhile", storage.describe(), error)
+        self._writer = writer
+        return AlarmJournal(database, writer, runtime.config.name)
+
+    def _after_cycle(self, task: Any) -> None:
+        if self._running:
+            self.evaluate()
+
+    def evaluate(self) -> None:
+        """Evaluate the alarms and refresh the summary tags (at a scan boundary)."""
+        engine = self.engine
+        summary = self._summary
+        assert engine is not None and summary is not None
+        engine.evaluate()
+        if engine.changed or summary.requested():
+            engine.changed = False
+            summary.publish(engine.active_count, engine.unacknowledged_count, engine.highest_active_priority, engine.shelved_count)
+
+    async def _tick(self, runtime: Runtime) -> None:
+        while self._running:
+            await runtime.clock.sleep(IDLE_TICK)
+            self.evaluate()
+
+    async def stop(self) -> None:
+        self._running = False
+        for undo in reversed(self._undo):
+            try:
+                undo()
+            except ValueError:  # already gone
+                pass
+        self._undo.clear()
+        if self._summary is not None:
+            self._summary.cancel()
+        if self._writer is not None:
+            await asyncio.to_thread(self._writer.stop)
+            self._writer = None
+
+    def metrics(self) -> dict[str, Any]:
+        """Figures for /metrics (softplc/adapters/metrics/catalog.py): alarms active, unacknowledged, shelved."""
+        engine = self.engine
+        if engine is None:
+            return {}
+        return {"active": engine.active_count, "unacknowledged": engine.unacknowledged_count, "shelved": engine.shelved_count}
+
+    def describe(self) -> str:
+        count = len(self.engine.alarms) if self.engine is not None else len(self.settings.definitions)
+        where = self.storage.describe() if self.storage is not None else "the state directory"
+        return f"alarms: {count} defined, journal in {where}"

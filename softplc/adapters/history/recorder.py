@@ -1,0 +1,230 @@
+"""The historian adapter: listens to tag changes, filters them, hands the rows to the writer thread.
+
+Each recorded tag has a `TagFilter`: an exception deadband (a value is kept only when it moved
+more than the deadband since the last kept one), then swinging-door compression when the rule
+asks for it. A quality change is always recorded (the held value first, so the shape is kept).
+Filtering runs on the event loop inside the change notification (a few microseconds a value);
+the SQL runs on the store's one writer thread. Timestamps are the tags' own (the runtime clock's
+wall time: simulated under --sim).
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+from softplc.adapters.history.commands import register_history_commands
+from softplc.adapters.history.queries import HistoryReader
+from softplc.adapters.history.settings import HistorySettings, TagPolicy
+from softplc.adapters.history.store import SINK_NAME, HistorySink, TagInfo
+from softplc.adapters.history.swinging_door import SwingingDoor
+from softplc.util.realtime import shorten_switch_interval
+from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
+from softplc.core.tags import Quality, Tag
+
+if TYPE_CHECKING:
+    from softplc.app.runtime import Runtime
+
+log = logging.getLogger(__name__)
+
+Row = tuple[str, float, Any, Quality]
+HEARTBEAT_TICK = 1.0  # s of runtime clock between two heartbeat checks
+
+
+class TagFilter:
+    """Decides which values of one tag are stored (deadband, then compression)."""
+
+    __slots__ = ("name", "deadband", "door", "numeric", "last", "quality")
+
+    def __init__(self, name: str, policy: TagPolicy, numeric: bool) -> None:
+        self.name = name
+        self.deadband = policy.deadband
+        self.door = SwingingDoor(*policy.compression) if policy.compression else None
+        self.numeric = numeric
+        self.last: Any = None  # the last value passed on (deadband reference)
+        self.quality: Quality | None = None
+
+    def offer(self, when: float, value: Any, quality: Quality) -> list[Row]:
+        """The rows to store for a new value of the tag."""
+        name = self.name
+        if quality is not self.quality or self.last is None:
+            rows: list[Row] = []
+            door = self.door
+            if door is not None:
+                rows = [(name, t, v, self.quality or quality) for t, v in door.release()]
+                door.restart()
+                if quality is not Quality.BAD:
+                    door.offer(when, value)
+            self.last, self.quality = value, quality
+            rows.append((name, when, value, quality))
+            return rows
+        if not self.numeric:
+            self.last = value
+            return [(name, when, value, quality)]
+        if self.deadband and abs(value - self.last) <= self.deadband:
+            return []
+        self.last = value
+        door = self.door
+        if door is None or quality is Quality.BAD:
+            return [(name, when, value, quality)]
+        return [(name, t, v, quality) for t, v in door.offer(when, value)]
+
+    def heartbeat(self, now: float) -> list[Row]:
+        """Store the held value, or repeat the current one, when max_interval has passed."""
+        door = self.door
+        if door is None or not door.due(now) or self.quality is None:
+            return []
+        rows = [(self.name, t, v, self.quality) for t, v in door.release()]
+        if not rows and self.quality is not Quality.BAD:
+            door.restart()
+            rows = [(self.name, t, v, self.quality) for t, v in door.offer(now, self.last)]
+        return rows
+
+    def release(self) -> list[Row]:
+        """The held value, stored now (the end of recording)."""
+        if self.door is None or self.quality is None:
+            return []
+        return [(self.name, t, v, self.quality) for t, v in self.door.release()]
+
+
+class HistoryRecorder:
+    """The historian: `start(runtime)`, `stop()`, `describe()` (see module docstring)."""
+
+    name = "history"
+
+    def __init__(self, settings: HistorySettings, plant: str, policies: dict[str, TagPolicy], types: dict[str, tuple[str, str]]) -> None:
+        """`types`: tag name → (type, unit) of every recorded tag."""
+        self.settings = settings
+        self.plant = plant
+        self.policies = policies
+        self.types = types
+        self.storage: StorageSettings | None = None
+        self.writer: BatchWriter | None = None
+        self.filters: dict[str, TagFilter] = {}
+        self._unsubscribe: Any = None
+        self._due: list[tuple[float, str]] = []  # heartbeat deadlines (runtime wall time), a heap
+        self._scheduled: set[str] = set()  # tags with an entry in _due (one each, so the heap stays small)
+        self._runtime: Runtime | None = None
+        self._reader: HistoryReader | None = None
+        self._unregister: Any = None
+
+    async def start(self, runtime: Runtime) -> None:
+        from softplc.app.runtime import AdapterError
+
+        self._runtime = runtime
+        simulated = runtime.clock.simulated
+        self.storage = self.settings.storage(runtime.state_dir, simulated=simulated)
+        if simulated and self.storage.path is not None:
+            # A simulated run starts at the same simulated instant every time: its history
+            # replaces the previous run's instead of overlapping it.
+            try:
+                remove_sqlite_store(self.storage.path)
+            except OSError as error:
+                raise AdapterError(f"history: cannot open SQLite {self.storage.path}: {error}") from None
+        infos = [TagInfo(name, kind, unit, self.policies[name].stepped) for name, (kind, unit) in self.types.items()]
+        sink = HistorySink(self.plant, infos, partition=self.settings.partition, retention=self.settings.retention)
+        database = Database(self.storage)
+        writer = BatchWriter(database, name="softplc-history-writer")
+        writer.register(sink)
+        shorten_switch_interval()  # the writer thread builds rows in Python between its SQL calls
+        error = await runtime.clock.run_blocking(writer.start)
+        if error is not None:
+            if not database.postgresql:
+                await runtime.clock.run_blocking(writer.stop)
+                raise AdapterError(f"history: cannot open {database.describe()}: {error}")
+            log.warning("history: %s is unreachable (%s); recording continues in memory and is written when it is back", database.describe(), error)
+        self.writer = writer
+        # Reads for other adapters (OPC UA HistoryRead, trends) go through runtime.commands.
+        self._reader = HistoryReader(database, self.plant)
+        self._unregister = register_history_commands(runtime, self._reader, {info.name: info for info in infos if info.name in runtime.db})
+        db = runtime.db
+        self.filters = {name: TagFilter(name, policy, self.types[name][0] != "string" and not self.types[name][0] == "bool")
+                        for name, policy in self.policies.items() if name in db}
+        self._changed([db[name] for name in self.filters])  # the starting values
+        self._unsubscribe = db.on_change(self._changed)
+        if any(f.door is not None and math.isfinite(f.door.max_interval) for f in self.filters.values()):
+            runtime.spawn(self._heartbeats(), "history-heartbeat")
+
+    async def stop(self) -> None:
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+        if self._unregister is not None:
+            self._unregister()
+            self._unregister = None
+        if self._reader is not None and self._runtime is not None:
+            await self._runtime.clock.run_blocking(self._reader.close)
+            self._reader = None
+        writer = self.writer
+        if writer is None:
+            return
+        rows: list[Row] = []
+        for tag_filter in self.filters.values():
+            rows += tag_filter.release()
+        writer.put(SINK_NAME, rows)
+        assert self._runtime is not None
+        await self._runtime.clock.run_blocking(writer.stop)
+        self.writer = None
+
+    def describe(self) -> str:
+        where = self.storage.describe() if self.storage else "?"
+        sim = " (simulated time)" if self._runtime is not None and self._runtime.clock.simulated else ""
+        period = self.storage.flush_period if self.storage else 0.0
+        return f"history: recording {len(self.filters)} tags to {where}{sim}, flushed every {period:g} s"
+
+    def metrics(self) -> dict[str, Any]:
+        """Figures for /metrics (softplc/adapters/metrics/catalog.py): rows written, the queue's depth, drops, failed commits."""
+        writer = self.writer
+        if writer is None:
+            return {}
+        stats = writer.stats
+        return {"tags": len(self.filters), "rows_written": stats.rows_written, "queue": stats.pending,
+                "rows_dropped": stats.dropped, "errors": stats.errors}
+
+    def flush(self, timeout: float = 30.0) -> bool:
+        """Commit what was recorded so far (blocking: tests, the export of a running plant)."""
+        return self.writer.flush(timeout) if self.writer is not None else False
+
+    # -- internals ------------------------------------------------------------------------
+
+    def _changed(self, tags: Sequence[Tag]) -> None:
+        filters = self.filters
+        rows: list[Row] = []
+        for tag in tags:
+            tag_filter = filters.get(tag.definition.name)
+            if tag_filter is None:
+                continue
+            new = tag_filter.offer(tag.timestamp, tag.value, tag.quality)
+            if new:
+                rows += new
+                door = tag_filter.door
+                if door is not None and door.archived is not None and tag_filter.name not in self._scheduled and math.isfinite(door.max_interval):
+                    self._scheduled.add(tag_filter.name)
+                    heapq.heappush(self._due, (door.archived[0] + door.max_interval, tag_filter.name))
+        if rows and self.writer is not None:
+            self.writer.put(SINK_NAME, rows)
+
+    async def _heartbeats(self) -> None:
+        assert self._runtime is not None
+        clock = self._runtime.clock
+        while True:
+            await clock.sleep(HEARTBEAT_TICK)
+            now = clock.wall()
+            rows: list[Row] = []
+            due = self._due
+            while due and due[0][0] <= now:
+                _, name = heapq.heappop(due)
+                tag_filter = self.filters[name]
+                rows += tag_filter.heartbeat(now)
+                door = tag_filter.door
+                if door is not None and door.archived is not None:  # due again max_interval after its last archived point
+                    deadline = door.archived[0] + door.max_interval
+                    # Nothing to archive (a bad value): look again later, not in this same loop.
+                    heapq.heappush(due, (deadline if deadline > now else now + door.max_interval, name))
+                else:
+                    self._scheduled.discard(name)
+            if rows and self.writer is not None:
+                self.writer.put(SINK_NAME, rows)

@@ -1,0 +1,332 @@
+"""The live channel: one WebSocket per browser at `/api/live`, fed from the tag database's changes.
+
+Protocol (JSON text messages; docs/hmi.md):
+
+    server → {"type": "hello", "instance": ID, "heartbeat": 2.0, "rate": 10, "user": ..., "role": ...}
+    client → {"type": "subscribe", "items": ["t01_iBL", "=t01_iBL > 90", ...]}   (replaces the set)
+    server → {"type": "snapshot", "time": 1767225600.1, "values": {"t01_iBL": 42.0, ...}, "done": true}
+    server → {"type": "update", "time": T, "values": {...}, "times": {...}, "quality": {...}}
+             only changed items, at most `rate` per second (fanout.py: the wire format)
+    client → {"type": "alarms", "on": true}   alarm snapshot, then alarm changes (alarm_feed.py)
+    both   → {"type": "ping"} every `heartbeat` seconds; each side drops a peer silent for 2.5 of them
+
+The scan is never held up: `db.on_change` only hands the list of changed tags to a dispatcher
+task, which marks the subscribed groups; each group encodes its update once, in chunks. Each
+slice of that work is one *turn* of pacing.py: one at a time, never into a scan cycle due
+within 5 ms.
+
+Pacing (rate limit, heartbeats, slow-client drop) is in real time even under `--sim --speed N`:
+it protects the network and the browser, which live in real time. Paced on the simulated clock,
+a run at 100x would send 1,000 updates per second to every browser, and one as fast as possible
+would flood them (or, idle, never send at all).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import secrets
+import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+from aiohttp import WSMsgType, web
+
+from softplc.core.clock import Clock
+from softplc.adapters.hmi.expressions import ExpressionTable
+from softplc.adapters.hmi.fanout import Client, Encoder, Group
+from softplc.adapters.hmi.pacing import Pacer
+from softplc.adapters.hmi.sessions import Identity
+from softplc.util.peers import PeerLog, peer_host
+from softplc.core.tagdb import TagDatabase
+from softplc.core.tags import Tag
+
+if TYPE_CHECKING:
+    from softplc.adapters.hmi.alarm_feed import AlarmFeed
+    from softplc.adapters.hmi.security import OriginPolicy
+    from softplc.adapters.hmi.sessions import Sessions
+
+log = logging.getLogger(__name__)
+
+MAX_ITEMS = 20_000  # items in one subscription
+MAX_MESSAGE = 2 * 1024 * 1024  # bytes of one client message (a subscription of 20,000 names fits)
+SUBSCRIBE_INTERVAL = 0.1  # s: a client changing its subscription faster gets the last one it asked for
+SILENCE = 2.5  # heartbeats without a word before a peer is taken for gone
+DISPATCH_SLICE = 1000  # changed tags sorted into groups per turn (~0.3 ms)
+
+
+class Hub:
+    """Every live client, grouped by what they watch; pushes changed values to them."""
+
+    def __init__(self, db: TagDatabase, expressions: ExpressionTable, clock: Clock, *, rate: float, heartbeat: float,
+                 max_clients: int, drop_after: float | None = None) -> None:
+        self.db = db
+        self.expressions = expressions
+        self.clock = clock
+        self.rate = rate
+        self.heartbeat = heartbeat
+        self.max_clients = max_clients
+        self.drop_after = drop_after if drop_after is not None else max(10.0, 5 * heartbeat)
+        self.instance = secrets.token_hex(8)  # a new one per start: pages notice the runtime restarted
+        self.clients: set[Client] = set()
+        self.groups: dict[tuple[frozenset[str], float], Group] = {}
+        self.pacer = Pacer(clock)
+        self.encoder = Encoder(self._lookup, self.pacer)
+        self._watchers: dict[str, list[Group]] = {}
+        self._incoming: list[Sequence[Tag]] = []
+        self._wake = asyncio.Event()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._unsubscribe: Any = None
+        self.peer_log = PeerLog(log, service="HMI")
+        self.alarm_feed: AlarmFeed | None = None  # set by the server when the runtime has alarms
+        self.dropped = 0  # clients dropped for being too slow or silent
+        self.dispatch_seconds = 0.0
+
+    # -- lifecycle ----------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self._unsubscribe = self.db.on_change(self._changed)
+        self._tasks = [asyncio.create_task(self._dispatch(), name="hmi-dispatch"),
+                       asyncio.create_task(self._heartbeats(), name="hmi-heartbeats")]
+
+    async def stop(self) -> None:
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+        for task in self._tasks:
+            task.cancel()
+        for client in list(self.clients):
+            try:
+                await asyncio.wait_for(client.ws.close(code=1001, message=b"runtime stopping"), 1.0)
+            except (asyncio.TimeoutError, ConnectionError, RuntimeError):
+                client.abort()
+            await client.stop()
+        for group in self.groups.values():
+            if group.task is not None:
+                group.task.cancel()
+        self.clients.clear()
+        self.groups.clear()
+        self._watchers.clear()
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            "clients": len(self.clients),
+            "groups": len(self.groups),
+            "frames_sent": sum(client.sent_frames for client in self.clients),
+            "bytes_sent": sum(client.sent_bytes for client in self.clients),
+            "messages_encoded": self.encoder.messages,
+            "encode_seconds": round(self.encoder.seconds, 4),
+            "dispatch_seconds": round(self.dispatch_seconds, 4),
+            "dropped": self.dropped,
+            "behind": sum(1 for client in self.clients if client.behind_since is not None),
+        }
+
+    # -- changes in -----------------------------------------------------------------------------
+
+    def _changed(self, tags: Sequence[Tag]) -> None:
+        # Called inside the scan cycle: hand the list over, nothing more.
+        self._incoming.append(tags)
+        self._wake.set()
+
+    async def _dispatch(self) -> None:
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            batches, self._incoming = self._incoming, []
+            if not self.groups:  # no browser watches anything: no turns to take
+                continue
+            due: dict[Group, None] = {}
+            for tags in batches:
+                for start in range(0, len(tags), DISPATCH_SLICE):
+                    async with self.pacer.turn():
+                        self._sort(tags[start:start + DISPATCH_SLICE], due)
+                async with self.pacer.turn():
+                    begun = time.thread_time()
+                    for item in self.expressions.changed(tags):
+                        for group in self._watchers.get(item.name, ()):
+                            group.mark(item.name)
+                            due[group] = None
+                    self.dispatch_seconds += time.thread_time() - begun
+            for group in due:
+                if group.task is None and group.clients:
+                    group.task = asyncio.create_task(group.run(self.pacer), name="hmi-group")
+
+    def _sort(self, tags: Sequence[Tag], due: dict[Group, None]) -> None:
+        """Mark the changed tags in the groups that watch them (set intersections: C speed, not a loop per tag)."""
+        if not self.groups:
+            return
+        begun = time.thread_time()
+        changed = {tag.name for tag in tags}
+        for group in self.groups.values():
+            watched = changed & group.members_of
+            if watched:
+                group.mark_all(watched)
+                due[group] = None
+        self.dispatch_seconds += time.thread_time() - begun
+
+    def _lookup(self, name: str) -> Any:
+        tag = self.db.get(name)
+        return tag if tag is not None else self.expressions.get(name)
+
+    def known(self, name: str) -> bool:
+        return name in self.db or name in self.expressions
+
+    # -- clients --------------------------------------------------------------------------------
+
+    def subscribe(self, client: Client, names: list[str]) -> list[str]:
+        """Move the client to the group of `names` (known ones); returns the unknown ones."""
+        known = [name for name in names if self.known(name)]
+        unknown = [name for name in names if not self.known(name)]
+        key = (frozenset(known), self.rate)
+        self._leave(client)
+        group = self.groups.get(key)
+        if group is None:
+            group = self.groups[key] = Group(key, self.encoder)
+            for name in key[0]:
+                self._watchers.setdefault(name, []).append(group)
+        group.clients.add(client)
+        client.group = group
+        client.resynchronise()
+        return unknown
+
+    def _leave(self, client: Client) -> None:
+        group = client.group
+        client.group = None
+        if group is None:
+            return
+        group.clients.discard(client)
+        if not group.clients:
+            del self.groups[group.key]
+            for name in group.key[0]:
+                watching = self._watchers.get(name)
+                if watching is not None:
+                    watching.remove(group)
+                    if not watching:
+                        del self._watchers[name]
+            if group.task is not None:
+                group.task.cancel()
+
+    async def _heartbeats(self) -> None:
+        """Ping every client each heartbeat; drop the silent and the hopelessly slow ones (checked every second)."""
+        tick = min(self.heartbeat, 1.0)
+        last_ping = time.monotonic()
+        while True:
+            await self.pacer.sleep(tick)
+            now = time.monotonic()
+            ping = now - last_ping >= self.heartbeat - tick / 2
+            if ping:
+                last_ping = now
+            for client in list(self.clients):
+                if now - client.last_received > SILENCE * self.heartbeat:
+                    self._drop(client, f"silent for {SILENCE * self.heartbeat:.1f} s")
+                elif client.behind_since is not None and now - client.behind_since > self.drop_after:
+                    self._drop(client, f"more than {self.drop_after:.0f} s behind (too slow to read its updates)")
+                elif ping:
+                    client.control({"type": "ping"})
+
+    def _drop(self, client: Client, why: str) -> None:
+        self.dropped += 1
+        self.peer_log.warning(peer_host(client.peer), "dropped live clients", "HMI: live client %s dropped: %s", client.peer, why)
+        client.abort()
+
+    # -- the WebSocket endpoint -----------------------------------------------------------------
+
+    async def handle(self, request: web.Request, identity: Identity, origins: OriginPolicy, sessions: Sessions) -> web.StreamResponse:
+        """GET /api/live: checks done by the caller (identity); here the Origin and the client limit."""
+        origin = request.headers.get("Origin")
+        if origin is not None and not origins.allowed(origin, request):
+            self.peer_log.warning(peer_host(request.remote), "refused live origins", "HMI: live connection from %s refused: origin %s",
+                                  request.remote, origin, detail=origin)
+            raise web.HTTPForbidden(text="cross-origin WebSocket refused")
+        if len(self.clients) >= self.max_clients:
+            raise web.HTTPServiceUnavailable(text=f"at most {self.max_clients} live connections")
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, compress=False, autoping=True)
+        await ws.prepare(request)
+        client = Client(ws, request.transport, identity, str(request.remote), self.encoder, self.pacer)
+        self.clients.add(client)
+        client.start()
+        client.control({"type": "hello", "instance": self.instance, "heartbeat": self.heartbeat, "rate": self.rate,
+                        "user": identity.user, "role": identity.role.value})
+        subscriber = _Subscriber(self, client)
+        try:
+            async for message in ws:
+                client.last_received = time.monotonic()
+                if message.type is not WSMsgType.TEXT:
+                    continue
+                subscriber.handle(message.data)
+        finally:
+            subscriber.cancel()
+            if self.alarm_feed is not None:
+                self.alarm_feed.leave(client)
+            self._leave(client)
+            self.clients.discard(client)
+            await client.stop()
+        return ws
+
+
+class _Subscriber:
+    """A client's requests: at most one subscription change per SUBSCRIBE_INTERVAL (the last wins)."""
+
+    def __init__(self, hub: Hub, client: Client) -> None:
+        self.hub = hub
+        self.client = client
+        self._wanted: list[str] | None = None
+        self._timer: asyncio.TimerHandle | None = None
+        self._last = 0.0
+        self._joining: asyncio.Task[None] | None = None
+
+    def handle(self, text: str) -> None:
+        try:
+            message = json.loads(text)
+        except ValueError:
+            self.client.control({"type": "error", "message": "not JSON"})
+            return
+        kind = message.get("type") if isinstance(message, dict) else None
+        if kind == "ping":
+            self.client.control({"type": "pong"})
+        elif kind == "subscribe":
+            items = message.get("items")
+            if not isinstance(items, list) or not all(isinstance(item, str) for item in items):
+                self.client.control({"type": "error", "message": "subscribe needs 'items': a list of names"})
+            elif len(items) > MAX_ITEMS:
+                self.client.control({"type": "error", "message": f"at most {MAX_ITEMS} items in one subscription"})
+            else:
+                self._wanted = list(dict.fromkeys(items))
+                self._schedule()
+        elif kind == "alarms":
+            self._alarms(message.get("on", True))
+        elif kind != "pong":
+            self.client.control({"type": "error", "message": f"unknown message type {kind!r}"})
+
+    def _alarms(self, on: Any) -> None:
+        feed = self.hub.alarm_feed
+        if feed is None:
+            self.client.control({"type": "error", "message": "this runtime has no alarms"})
+        elif on is False:
+            feed.leave(self.client)
+        elif self.client not in feed.clients and (self._joining is None or self._joining.done()):
+            self._joining = asyncio.create_task(feed.join(self.client), name="hmi-alarms-join")
+
+    def _schedule(self) -> None:
+        if self._timer is not None:
+            return
+        delay = self._last + SUBSCRIBE_INTERVAL - time.monotonic()
+        self._timer = asyncio.get_running_loop().call_later(max(0.0, delay), self._apply)
+
+    def _apply(self) -> None:
+        self._timer = None
+        wanted, self._wanted = self._wanted, None
+        if wanted is None or self.client.ws.closed:
+            return
+        self._last = time.monotonic()
+        unknown = self.hub.subscribe(self.client, wanted)
+        if unknown:
+            self.client.control({"type": "unknown", "items": unknown[:100], "count": len(unknown)})
+
+    def cancel(self) -> None:
+        if self._joining is not None:
+            self._joining.cancel()
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
