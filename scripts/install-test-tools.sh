@@ -10,7 +10,7 @@ command -v npm >/dev/null 2>&1 || apt_packages+=(nodejs npm)
 compgen -G "/usr/lib/postgresql/*/bin/initdb" >/dev/null || apt_packages+=(postgresql)
 # The HMI's browser tests drive Debian's Chromium with the playwright package (never `playwright install`).
 command -v chromium >/dev/null 2>&1 || apt_packages+=(chromium)
-# tests/test_metrics_prometheus.py has a real Prometheus server scrape the HMI's /metrics.
+# tests/adapters/metrics/test_metrics_prometheus.py has a real Prometheus server scrape the HMI's /metrics.
 [ -x /usr/bin/prometheus ] || apt_packages+=(prometheus)
 if [ ${#apt_packages[@]} -gt 0 ]; then
   echo "installing system packages: ${apt_packages[*]}" >&2

@@ -1,5 +1,5 @@
 """A section owner written the way a new adapter writes one: `notebook:` at the top level, a
-`notebook:` key on tags and templates, and a `record:` key on programs. tests/test_config_sections.py
+`notebook:` key on tags and templates, and a `record:` key on programs. tests/config/test_config_sections.py
 plugs it into the registry (softplc.config.sections.SECTION_MODULES)."""
 
 from __future__ import annotations

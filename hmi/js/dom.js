@@ -1,6 +1,6 @@
 // DOM helpers. Text from the configuration (names, descriptions, units) only ever goes in as
 // text (textContent / attribute values), never as markup: a "<script>" in a description shows
-// as those characters. No module of the HMI uses innerHTML (tests/test_hmi_security.py checks).
+// as those characters. No module of the HMI uses innerHTML (tests/adapters/hmi/test_hmi_security.py checks).
 
 const SVG_NS = 'http://www.w3.org/2000/svg';
 

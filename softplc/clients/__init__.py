@@ -4,5 +4,5 @@
 plant's namespace and tag types), `door_client` (calling runtime commands remotely); one folder
 per command family, each with its `cli.py`: `tags` (read, write, watch, force), `alarms`, `audit`,
 `apply` (online change), `robot_agent` (a robot on its own computer).
-Clients import no server module (tests/test_imports.py).
+Clients import no server module (tests/app/test_imports.py).
 """

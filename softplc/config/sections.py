@@ -8,7 +8,7 @@ JSON Schema, the keys it adds to every tag, template and program (their values l
 say. To add a section, define `SECTION` in a light module and list the module in
 SECTION_MODULES (docs/runtime.md, "Adding a configuration section"). Owners import `Section`
 from `softplc.config.schema` and `PlantConfig` from `softplc.config.plant`, never this module or the
-loader, so the registry stays free of import cycles (tests/test_imports.py).
+loader, so the registry stays free of import cycles (tests/app/test_imports.py).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ if TYPE_CHECKING:
 # Modules that own a section (each defines SECTION, or SECTIONS for several), in the order their
 # problems are reported.
 # They are imported whenever a configuration is loaded, so they must not import asyncua,
-# pymodbus, numpy and the like at module level (tests/test_config_sections.py checks it).
+# pymodbus, numpy and the like at module level (tests/config/test_config_sections.py checks it).
 SECTION_MODULES: tuple[str, ...] = (
     "softplc.engine.section",
     "softplc.adapters.opcua.section",

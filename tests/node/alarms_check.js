@@ -1,4 +1,4 @@
-// node-opcua, a client none of us wrote, as an alarm display: run by tests/test_alarms_node.py.
+// node-opcua, a client none of us wrote, as an alarm display: run by tests/adapters/alarms/test_alarms_node.py.
 //
 //   node alarms_check.js ENDPOINT USER PASSWORD
 //

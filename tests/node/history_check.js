@@ -1,5 +1,5 @@
 // An independent client (node-opcua) reads softplc's history: raw values page by page with continuation
-// points, processed Average (and Maximum), values at times; run by tests/test_opcua_history_node.py.
+// points, processed Average (and Maximum), values at times; run by tests/adapters/opcua/test_opcua_history_node.py.
 //
 //   node history_check.js ENDPOINT USER PASSWORD EPOCH_MS
 //

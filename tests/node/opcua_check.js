@@ -1,4 +1,4 @@
-// An independent OPC UA client (node-opcua) exercising softplc's server; run by tests/test_opcua_node.py.
+// An independent OPC UA client (node-opcua) exercising softplc's server; run by tests/adapters/opcua/test_opcua_node.py.
 //
 //   node opcua_check.js ENDPOINT USER PASSWORD [SignAndEncrypt CERT.pem KEY.pem APPLICATION_URI [WAIT_FILE]]
 //

@@ -1,5 +1,5 @@
 // An independent client (node-opcua) checks what softplc's server tells about time, deadbands,
-// queue sizes, history and methods; run by tests/test_opcua_node.py.
+// queue sizes, history and methods; run by tests/adapters/opcua/test_opcua_node.py.
 //
 //   node opcua_services_check.js ENDPOINT USER PASSWORD
 //

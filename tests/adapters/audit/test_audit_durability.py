@@ -32,7 +32,7 @@ from conftest import REPO
 
 FLUSH = 0.25  # s
 # A commit takes its own time, and on a shared 2-core machine the child may wait for the CPU for
-# hundreds of ms (tests/test_history_durability.py measured up to 0.55 s at load 7): the bound
+# hundreds of ms (tests/adapters/history/test_history_durability.py measured up to 0.55 s at load 7): the bound
 # checked is the flush period plus this allowance. With the flush period wrongly at 2 s the loss
 # would be 2 s or more, far beyond it.
 COMMIT_ALLOWANCE = 0.5

@@ -11,7 +11,7 @@ import json
 
 from tests.alarms_support import DRIVER, plant, running_alarm_plant
 from tests.opcua_support import PASSWORDS
-from tests.test_opcua_node import NODE_DIR, _require_node_opcua
+from tests.adapters.opcua.test_opcua_node import NODE_DIR, _require_node_opcua
 
 ALARMS = """
 definitions:

@@ -12,7 +12,7 @@ from softplc.adapters.history.aggregates import Aggregate, AggregateConfig, Flag
 from softplc.adapters.history.reads import InvalidContinuation, read_processed, read_raw
 from softplc.storage import StorageSettings
 from softplc.core.tags import Quality
-from tests.test_history_store import T0, Store
+from tests.adapters.history.test_history_store import T0, Store
 
 GOOD, UNCERTAIN, BAD = Quality.GOOD, Quality.UNCERTAIN, Quality.BAD
 CALC, INTERP, PARTIAL, MULTI = Flags.CALCULATED, Flags.INTERPOLATED, Flags.PARTIAL, Flags.MULTI_VALUE

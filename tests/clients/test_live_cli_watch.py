@@ -17,7 +17,7 @@ from pathlib import Path
 from softplc.core.tagdb import Origin
 from tests.conftest import REPO
 from tests.opcua_support import running_plant
-from tests.test_live_cli import force
+from tests.clients.test_live_cli import force
 
 ROWS, COLUMNS = 30, 120
 

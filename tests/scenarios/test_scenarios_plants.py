@@ -12,6 +12,7 @@ from typing import Any
 
 import pytest
 
+from conftest import REPO
 from softplc.config import PlantConfig
 from softplc.app.runtime import Adapter, Runtime
 from softplc.scenarios.runner import RunResult, fleet_adapter, run_scenario
@@ -143,7 +144,7 @@ robots:
 
 @pytest.mark.parametrize("dispatcher", ["weighting", "cooperative", "svm", "optimal"])
 def test_every_dispatcher_keeps_each_team_within_its_max_team_size(tmp_path: Path, dispatcher: str) -> None:
-    model = Path(__file__).resolve().parent.parent / "scenarios" / "svm" / "case3-sim1-model.json"
+    model = REPO / "scenarios" / "svm" / "case3-sim1-model.json"
     plant = scenario(tmp_path, TEAMS.replace("DISPATCHER", dispatcher).replace("MODEL", str(model)))
     watches: list[TeamWatch] = []
 
