@@ -1,6 +1,6 @@
 """A section owner written the way a new adapter writes one: `notebook:` at the top level, a
 `notebook:` key on tags and templates, and a `record:` key on programs. tests/config/test_config_sections.py
-plugs it into the registry (softplc.config.sections.SECTION_MODULES)."""
+plugs it into the registry as a manifest's section (softplc/config/manifest.py)."""
 
 from __future__ import annotations
 

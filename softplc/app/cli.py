@@ -1,8 +1,9 @@
 """The `softplc` command line: a thin layer over the runtime and its adapters.
 
-Core commands live here (run, check, tags, schema). Adapters and tools add their own
-subcommands through modules listed in COMMAND_MODULES: each defines
-`add_commands(subparsers)` and sets `func` on its parsers.
+Core commands live here (run, check, tags, schema). Adapters add their own subcommands through
+the modules their manifests list (`Manifest.commands`); the clients and the thesis tools through
+the modules listed in COMMAND_MODULES. Each such module defines `add_commands(subparsers)` and
+sets `func` on its parsers.
 """
 
 from __future__ import annotations
@@ -37,10 +38,10 @@ EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
 EXIT_RETAIN_CORRUPT = 3  # `softplc run`: retain.sqlite is corrupt; nothing started until the user chooses
 DEFAULT_CONFIG = "tagdb.yaml"
 
-# Modules that add subcommands (each defines add_commands(subparsers)).
-COMMAND_MODULES: tuple[str, ...] = ("softplc.adapters.modbus.cli", "softplc.svm.cli", "softplc.scenarios.cli", "softplc.latency.cli", "softplc.adapters.opcua.cli", "softplc.adapters.fleet.cli",
-                                   "softplc.adapters.history.cli", "softplc.clients.alarms.cli", "softplc.clients.tags.cli", "softplc.clients.apply.cli",
-                                   "softplc.clients.audit.cli")
+# Modules of the clients and tools that add subcommands (each defines add_commands(subparsers));
+# the adapters' come from their manifests.
+COMMAND_MODULES: tuple[str, ...] = ("softplc.svm.cli", "softplc.scenarios.cli", "softplc.latency.cli", "softplc.clients.alarms.cli",
+                                   "softplc.clients.tags.cli", "softplc.clients.apply.cli", "softplc.clients.audit.cli")
 
 log = logging.getLogger("softplc")
 
@@ -135,7 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
     schema = commands.add_parser("schema", help="print the JSON Schema of tagdb.yaml", description="Print the JSON Schema of the configuration file, for editors and CI.")
     schema.set_defaults(func=cmd_schema)
 
-    for module_name in COMMAND_MODULES:
+    from softplc.config.manifest import manifests
+
+    for module_name in (*(name for manifest in manifests() for name in manifest.commands), *COMMAND_MODULES):
         importlib.import_module(module_name).add_commands(commands)
     logs.add_log_arguments_to_commands(parser)
     return parser
@@ -188,7 +191,7 @@ def cmd_schema(args: argparse.Namespace) -> int:
 
 
 def cmd_tags(args: argparse.Namespace) -> int:
-    from softplc.engine.systags import runtime_tag_definitions
+    from softplc.config.system_tags import runtime_tag_definitions
 
     config = load_config(args.config)
     definitions = list(config.tags)
@@ -239,7 +242,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     until = None
     runtime_probe_names = [d.name for d in config.tags]
     if args.until:
-        from softplc.engine.systags import runtime_tag_definitions
+        from softplc.config.system_tags import runtime_tag_definitions
 
         try:
             until = Condition(args.until, runtime_probe_names + [d.name for d in runtime_tag_definitions(config)])
@@ -352,7 +355,8 @@ async def _status_loop(runtime: Any, show: bool, args: argparse.Namespace) -> No
     """Announce the adapters once they are up, then keep a one-line status (real time)."""
     await runtime.running.wait()
     for adapter in runtime.adapters:
-        print(f"serving: {adapter.describe()}", file=sys.stderr)
+        for line in filter(None, adapter.describe().splitlines()):  # an adapter may serve in several places, or say nothing
+            print(f"serving: {line}", file=sys.stderr)
     if not runtime.adapters:
         print("serving: nothing (no server enabled)", file=sys.stderr)
     from softplc.app.adapters import servers_off

@@ -1,11 +1,10 @@
 """The composition root: builds the core from a PlantConfig and runs it with its adapters.
 
 The core (tag database, scan engine, clock) knows nothing of protocols or robots; adapters
-(see `softplc.app.adapters`) are handed the runtime when they start and use only its public API:
-`runtime.db` (values: snapshot, subscribe to changes, submit writes with an origin),
-`runtime.commands` (actions with an origin: reset faults, program control, online change...),
-`runtime.events` (what happened: alarm transitions...), `runtime.clock`, `runtime.engine`,
-`runtime.spawn()`.
+(found by `softplc.app.adapters` from their manifests) are handed the plant API when they
+start — `runtime.plant`, a `softplc.core.plant.Plant`: the tags (snapshot, subscribe to
+changes, submit writes with an origin), the commands, the events, the clock, a state directory,
+the tasks' figures — and never the Runtime itself.
 """
 
 from __future__ import annotations
@@ -16,8 +15,9 @@ import gc
 import logging
 from collections.abc import Callable, Coroutine
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
+from softplc.app.plant import RuntimePlant
 from softplc.core.clock import Clock, RealClock, SimClock
 from softplc.core.commands import Commands
 from softplc.config import PlantConfig
@@ -25,15 +25,19 @@ from softplc.util.durations import parse_duration
 from softplc.core.events import EventBus
 from softplc.core.expression import Condition
 from softplc.engine.online_change.change import OnlineChange
+from softplc.core.plant import Adapter, AdapterError
 from softplc.core.program import ProgramContext
 from softplc.engine.program_control import register_program_commands
 from softplc.engine.retain import RetainStore, open_retained
 from softplc.engine.runtime_commands import register_runtime_commands
 from softplc.engine.scan import ProgramInstance, ProgramState, ScanEngine, Task
 from softplc.engine.stall import StallDetector
-from softplc.engine.systags import SystemTags, runtime_tag_definitions
+from softplc.config.system_tags import runtime_tag_definitions
+from softplc.engine.systags import SystemTags
 from softplc.core.tagdb import TagDatabase, WriteRejected
 from softplc.config.yamlsource import ConfigError, Location, Problem
+
+__all__ = ["Adapter", "AdapterError", "Runtime", "RuntimeState"]
 
 log = logging.getLogger(__name__)
 
@@ -44,24 +48,6 @@ class RuntimeState(enum.Enum):
     ERROR = "ERROR"
     STOPPING = "STOPPING"
     STOPPED = "STOPPED"
-
-
-class Adapter(Protocol):
-    """Something started around the core: a protocol server, a robot fleet, the HMI."""
-
-    name: str
-
-    async def start(self, runtime: Runtime) -> None: ...
-
-    async def stop(self) -> None: ...
-
-    def describe(self) -> str:
-        """One line for the user: where it serves, e.g. 'OPC UA on opc.tcp://127.0.0.1:4840/'."""
-        ...
-
-
-class AdapterError(RuntimeError):
-    """An adapter could not start (port in use, bad certificate...); the message says why."""
 
 
 class Runtime:
@@ -95,7 +81,9 @@ class Runtime:
         self.events = EventBus()
         register_runtime_commands(self)
         register_program_commands(self)
+        self._scan_gate: Any = None
         self.online_change = OnlineChange(self)
+        self.plant = RuntimePlant(self)  # what adapters are handed (softplc/core/plant.py)
         self.adapters: list[Adapter] = []
         self.state = RuntimeState.STARTING
         self.error = ""
@@ -137,6 +125,15 @@ class Runtime:
                 if instance.name == name:
                     return instance
         raise KeyError(name)
+
+    @property
+    def scan_gate(self) -> Any:
+        """The runtime's one ScanGate (softplc/engine/scan_gate.py) for worker threads; None on a simulated clock or without tasks."""
+        if self._scan_gate is None and not self.clock.simulated and self.tasks:
+            from softplc.engine.scan_gate import ScanGate
+
+            self._scan_gate = ScanGate(self.engine, self.clock)
+        return self._scan_gate
 
     @property
     def stopping(self) -> bool:
@@ -211,7 +208,7 @@ class Runtime:
         started: list[Adapter] = []
         try:
             for adapter in self.adapters:
-                await adapter.start(self)
+                await adapter.start(self.plant)
                 started.append(adapter)
         except BaseException:
             for adapter in reversed(started):

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from softplc.adapters.opcua.settings import DEFAULT_NAMESPACE
+from softplc.protocols.opcua_names import DEFAULT_NAMESPACE
 
 if TYPE_CHECKING:  # asyncua is imported by connect() only: `softplc --help` must not load it
     from asyncua import Client

@@ -9,7 +9,7 @@ from typing import Any
 
 from softplc.core.program import Program
 from softplc.core.fault_reaction import FaultReaction
-from softplc.engine.program_instance import NEVER, RestartPolicy
+from softplc.core.fault_reaction import NEVER, RestartPolicy
 from softplc.core.tags import TagDef
 from softplc.config.yamlsource import Location, Problem, SourceMap
 

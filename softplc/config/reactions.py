@@ -18,7 +18,7 @@ from softplc.config.tags import TagChecker
 from softplc.core.datatypes import TypeMismatch
 from softplc.util.durations import check_duration
 from softplc.core.fault_reaction import HOLD, INITIAL, FaultReaction
-from softplc.engine.program_instance import NEVER, RestartPolicy
+from softplc.core.fault_reaction import NEVER, RestartPolicy
 from softplc.util.suggest import did_you_mean
 from softplc.config.yamlsource import Problem, SourceMap
 

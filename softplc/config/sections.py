@@ -1,22 +1,23 @@
 """The owners of tagdb.yaml's sections, in one registry that `check`, `run` and `schema` read.
 
-The core's own sections (plant, tags, templates, tasks) are checked in `softplc.config`. Every
-other part of the file belongs to a module that declares it with a `SECTION` (a
-`softplc.config.schema.Section`): where its mapping lives (`("servers", "modbus")`, `("fleet",)`), its
-JSON Schema, the keys it adds to every tag, template and program (their values land in
-`TagDef.options[key]` and `ProgramConfig.options[key]`), and a check for what a schema cannot
-say. To add a section, define `SECTION` in a light module and list the module in
-SECTION_MODULES (docs/runtime.md, "Adding a configuration section"). Owners import `Section`
-from `softplc.config.schema` and `PlantConfig` from `softplc.config.plant`, never this module or the
-loader, so the registry stays free of import cycles (tests/app/test_imports.py).
+The core's own sections (plant, tags, templates, tasks) are checked in `softplc.config`, and the
+`runtime:` section by `softplc.config.runtime_section`. Every other part of the file belongs to
+an adapter, whose manifest lists its `Section`s (softplc/config/manifest.py): where its mapping
+lives (`("servers", "modbus")`, `("fleet",)`), its JSON Schema, the keys it adds to every tag,
+template and program (their values land in `TagDef.options[key]` and
+`ProgramConfig.options[key]`), and a check for what a schema cannot say. Adapters are found by
+scanning `softplc/adapters/` (docs/architecture.md, "Adding an adapter"). Owners import
+`Section` from `softplc.config.schema` and `PlantConfig` from `softplc.config.plant`, never this
+module or the loader, so the registry stays free of import cycles (tests/app/test_imports.py).
 """
 
 from __future__ import annotations
 
 import functools
-import importlib
 from typing import TYPE_CHECKING, Any
 
+from softplc.config.manifest import manifests
+from softplc.config.runtime_section import SECTION as RUNTIME_SECTION
 from softplc.config.schema import Section, build_schema, check_registry, strict_durations
 
 if TYPE_CHECKING:
@@ -24,30 +25,10 @@ if TYPE_CHECKING:
     from softplc.core.tags import TagDef
     from softplc.config.yamlsource import Problem
 
-# Modules that own a section (each defines SECTION, or SECTIONS for several), in the order their
-# problems are reported.
-# They are imported whenever a configuration is loaded, so they must not import asyncua,
-# pymodbus, numpy and the like at module level (tests/config/test_config_sections.py checks it).
-SECTION_MODULES: tuple[str, ...] = (
-    "softplc.engine.section",
-    "softplc.adapters.opcua.section",
-    "softplc.adapters.modbus.section",
-    "softplc.adapters.fleet.section",
-    "softplc.adapters.history.section",
-    "softplc.adapters.alarms.section",
-    "softplc.adapters.hmi.section",
-    "softplc.adapters.audit.section",
-)
-
-
 @functools.cache
 def registered() -> tuple[Section, ...]:
-    """Every owner's SECTION, in SECTION_MODULES order."""
-    owned: list[Section] = []
-    for name in SECTION_MODULES:
-        module = importlib.import_module(name)
-        owned.extend(getattr(module, "SECTIONS", None) or (module.SECTION,))  # an owner of two parts lists both
-    return check_registry(tuple(owned))
+    """Every owner's section: the runtime's, then each adapter's in start order (the order problems are reported in)."""
+    return check_registry((RUNTIME_SECTION, *(section for manifest in manifests() for section in manifest.sections)))
 
 
 def tag_keys(sections: tuple[Section, ...] | None = None) -> dict[str, dict[str, Any]]:

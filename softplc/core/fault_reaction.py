@@ -1,4 +1,4 @@
-"""A program's fault reaction: what its outputs do in the scan in which it faults (`on_fault:`).
+"""A program's fault reaction: what its outputs do in the scan in which it faults (`on_fault:`), and its restart policy (`restart:`).
 
 Like a PLC output module's reaction to a CPU fault, per program:
 
@@ -60,3 +60,19 @@ class FaultReaction:
         if not self.safe:
             return self.others
         return {"safe": dict(self.safe), "others": self.others}
+
+
+@dataclass(frozen=True)
+class RestartPolicy:
+    """Whether a faulted program is restarted by itself: `delay` s after the fault, at most `max_restarts` times."""
+
+    automatic: bool = False  # False: `restart: never` (the default), it stays FAULTED until a reset
+    delay: float = 1.0
+    max_restarts: int = 3
+
+    def describe(self) -> str | dict[str, Any]:
+        """As written in the configuration: 'never' or {'delay': seconds, 'max': n}."""
+        return {"delay": self.delay, "max": self.max_restarts} if self.automatic else "never"
+
+
+NEVER = RestartPolicy()

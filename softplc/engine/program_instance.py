@@ -15,10 +15,9 @@ import contextlib
 import enum
 import math
 import traceback
-from dataclasses import dataclass
 from typing import Any
 
-from softplc.core.fault_reaction import FaultReaction
+from softplc.core.fault_reaction import NEVER, FaultReaction, RestartPolicy
 from softplc.core.function_blocks import warm_start
 from softplc.util.log_format import BRIEF_TRACEBACK
 from softplc.core.program import Direction, Program, program_log
@@ -31,21 +30,6 @@ class ProgramState(enum.Enum):
     FAULTED = "FAULTED"
     STOPPED = "STOPPED"
 
-
-@dataclass(frozen=True)
-class RestartPolicy:
-    """Whether a faulted program is restarted by itself: `delay` s after the fault, at most `max_restarts` times."""
-
-    automatic: bool = False  # False: `restart: never` (the default), it stays FAULTED until a reset
-    delay: float = 1.0
-    max_restarts: int = 3
-
-    def describe(self) -> str | dict[str, Any]:
-        """As written in the configuration: 'never' or {'delay': seconds, 'max': n}."""
-        return {"delay": self.delay, "max": self.max_restarts} if self.automatic else "never"
-
-
-NEVER = RestartPolicy()
 
 Binding = str | list[str]
 

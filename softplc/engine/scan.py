@@ -21,7 +21,7 @@ from typing import Any
 
 from softplc.core.clock import Clock
 from softplc.engine.program_instance import NEVER, ProgramInstance, ProgramState, RestartPolicy
-from softplc.engine.stats import TimingSeries
+from softplc.core.stats import TimingSeries
 from softplc.core.tagdb import TagDatabase
 
 __all__ = ["NEVER", "CurrentScan", "ProgramInstance", "ProgramState", "RestartPolicy", "ScanEngine", "Task", "TaskStats"]
@@ -164,9 +164,10 @@ class ScanEngine:
         self._after_cycle: list[Callable[[Task], None]] = []
         self._stopping = False
 
-    def after_cycle(self, callback: Callable[[Task], None]) -> None:
-        """Call `callback(task)` after every cycle (e.g. to evaluate a stop condition)."""
+    def after_cycle(self, callback: Callable[[Task], None]) -> Callable[[], None]:
+        """Call `callback(task)` after every cycle (e.g. to evaluate a stop condition); returns an undo."""
         self._after_cycle.append(callback)
+        return lambda: self._after_cycle.remove(callback) if callback in self._after_cycle else None
 
     def stop(self) -> None:
         self._stopping = True

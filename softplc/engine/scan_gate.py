@@ -29,14 +29,18 @@ LONGEST_WAIT = 0.05  # a cycle that does not come (the engine stopping) never ho
 
 
 class ScanGate:
-    """One per runtime: `with gate.worker(): work()` in a worker thread pauses the work around every release."""
+    """One per runtime: `with gate.worker(): work()` in a worker thread pauses the work around every release.
+
+    Several threads may use it at once (the audit writer, an online change's check): each waits on
+    the same event; one that misses a wake-up waits at most LONGEST_WAIT, never the scan.
+    """
 
     def __init__(self, engine: ScanEngine, clock: Clock) -> None:
         self.engine = engine
         self.clock = clock
         self.pauses = 0  # how many times a worker stepped aside
         self._ran = threading.Event()
-        self._watching = False
+        self._watching = 0  # threads inside worker() or stepping()
         self._open_until = 0.0  # time.monotonic() until which no release is near
         engine.after_cycle(self._cycle_ran)  # registered on the loop's thread, once
 
@@ -48,13 +52,13 @@ class ScanGate:
     def worker(self) -> Iterator[None]:
         """Run the body (in a worker thread) so that it steps aside around the scan's releases."""
         self._open_until = 0.0
-        self._watching = True
+        self._watching += 1
         sys.setprofile(self._event)  # this thread only
         try:
             yield
         finally:
             sys.setprofile(None)
-            self._watching = False
+            self._watching -= 1
 
     @contextlib.contextmanager
     def stepping(self) -> Iterator[Callable[[], None]]:
@@ -64,11 +68,11 @@ class ScanGate:
         softplc/adapters/audit/store.py) keeps each step well under the margin (2 ms) itself.
         """
         self._open_until = 0.0
-        self._watching = True
+        self._watching += 1
         try:
             yield self.step
         finally:
-            self._watching = False
+            self._watching -= 1
 
     def step(self) -> None:
         """Between two steps of `stepping()` work: return at once, or wait until the cycle now due has run."""

@@ -23,13 +23,10 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import Any, Protocol, TextIO
 
 from softplc.util.log_format import JsonFormatter, PlantTime, TextFormatter
 from softplc.util.log_limit import DEFAULT_BURST, DEFAULT_INTERVAL, DEFAULT_LOGGER_BURST, FloodFilter
-
-if TYPE_CHECKING:
-    from softplc.core.clock import Clock
 
 LOG_FORMATS = ("text", "json")
 DEFAULT_MAX_BYTES = 10 * 1024 * 1024
@@ -178,7 +175,16 @@ def configure(options: LogOptions = LogOptions(), stream: TextIO | None = None) 
     _setup = setup
 
 
-def use_clock(clock: Clock | None) -> None:
+class _Clock(Protocol):
+    """What logging reads of the runtime's clock (softplc.core.clock.Clock)."""
+
+    @property
+    def simulated(self) -> bool: ...
+
+    def wall(self) -> float: ...
+
+
+def use_clock(clock: _Clock | None) -> None:
     """Take log timestamps from `clock` if it is simulated (its wall time); real time otherwise."""
     _setup.time.source = clock.wall if clock is not None and clock.simulated else None
 

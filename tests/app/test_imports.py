@@ -1,11 +1,18 @@
-"""No import cycles inside softplc: every module can be read, tested and changed from the bottom up.
+"""The layers of softplc, and no import cycles: every module can be read, tested and changed from the bottom up.
 
 The graph counts every import statement (at module level, inside functions and under
 TYPE_CHECKING: each is a dependency, even when Python would tolerate the cycle at run time)
-and the registries that name modules as strings (`COMMAND_MODULES`, `SECTION_MODULES`, the
-lazy `_MODULES` of package `__init__`s): a module listed there is imported by the registry's
-owner. Importing `a.b.c` also runs `a/__init__` and `a/b/__init__`; those implicit edges are
-not counted, or every package would be a cycle with its own modules.
+and the registries that name modules as strings (`COMMAND_MODULES`, the lazy `_MODULES` of
+package `__init__`s): a module listed there is imported by the registry's owner. Importing
+`a.b.c` also runs `a/__init__` and `a/b/__init__`; those implicit edges are not counted, or
+every package would be a cycle with its own modules. Adapters are found by scanning their
+folder (softplc/config/manifest.py), which is no import.
+
+The layers (docs/architecture.md), each importing only those below it: utilities ← core ←
+configuration ← engine ← adapters ← application. Security, storage, protocols and robotics are
+libraries the adapters (and the clients) use. No adapter imports another adapter, the engine or
+the application: it is handed the plant API (softplc/core/plant.py). The clients (command-line
+tools that talk to a running plant) import no adapter, engine or application module.
 """
 
 from __future__ import annotations
@@ -98,11 +105,12 @@ def test_the_graph_sees_every_kind_of_import() -> None:
     graph = import_graph()
     assert "softplc.config.plant" in graph["softplc.config.sections"]  # under TYPE_CHECKING
     assert "softplc.latency.client_process" in graph["softplc.latency.measurement"]  # inside a function
-    assert "softplc.adapters.opcua.cli" in graph["softplc.app.cli"]  # COMMAND_MODULES
-    assert "softplc.adapters.modbus.section" in graph["softplc.config.sections"]  # SECTION_MODULES
+    assert "softplc.clients.tags.cli" in graph["softplc.app.cli"]  # COMMAND_MODULES
+    assert "softplc.adapters.metrics.adapter" in graph["softplc.adapters.metrics.manifest"]  # inside a function
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
 def test_command_modules_print_tables_without_the_top_level_cli() -> None:
     graph = import_graph()
     assert [name for name, targets in graph.items() if "softplc.app.cli" in targets and name != "softplc.__main__"] == []
+

@@ -32,7 +32,12 @@ def _reset() -> None:
 @pytest.fixture
 def with_notebook(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     """The registry with the example owner of tests/section_example.py added."""
-    monkeypatch.setattr(sections, "SECTION_MODULES", (*sections.SECTION_MODULES, "section_example"))
+    import section_example
+
+    from softplc.config.manifest import Manifest, manifests
+
+    example = Manifest(name="notebook", title="notebook", order=99, build=lambda config, args: [], sections=(section_example.SECTION,))
+    monkeypatch.setattr(sections, "manifests", lambda: (*manifests(), example))
     _reset()
     yield
     monkeypatch.undo()
@@ -79,8 +84,9 @@ def test_every_owner_module_is_light_to_import() -> None:
 
 def test_the_existing_owners_are_registered_with_their_sections_and_keys() -> None:
     paths = [section.path for section in sections.registered()]
-    assert paths == [("runtime",), ("servers", "opcua"), ("servers", "modbus"), ("fleet",), ("history",), ("alarms",), ("servers", "hmi"), ("hmi",),
-                     ("audit",)]
+    # the runtime's, then each adapter's in start order (softplc/config/manifest.py)
+    assert paths == [("runtime",), ("audit",), ("alarms",), ("fleet",), ("history",), ("servers", "opcua"), ("servers", "modbus"),
+                     ("servers", "hmi"), ("hmi",)]
     assert set(sections.tag_keys()) == {"modbus", "history"}
     properties = sections.config_schema()["properties"]
     assert set(properties["servers"]["properties"]) == {"opcua", "modbus", "hmi"}
@@ -107,8 +113,8 @@ def test_without_its_owner_the_keys_are_unknown(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as caught:
         load_config(path)
     top, tag = [str(p) for p in caught.value.problems]
-    assert top.startswith(f"{path}:2:1: unknown key 'notebook'; expected one of: version, plant, templates, tags, tasks, runtime, servers, fleet")
-    assert tag.startswith(f"{path}:4:22: unknown key 'notebook'; expected one of: type, initial, unit, description, access, min, max, retain, group, shared_output, modbus")
+    assert top.startswith(f"{path}:2:1: unknown key 'notebook'; expected one of: version, plant, templates, tags, tasks, runtime, audit, alarms, fleet")
+    assert tag.startswith(f"{path}:4:22: unknown key 'notebook'; expected one of: type, initial, unit, description, access, min, max, retain, group, shared_output, history")
     assert "notebook" not in top.split("expected one of:")[1] and "notebook" not in tag.split("expected one of:")[1]
 
 

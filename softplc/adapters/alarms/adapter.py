@@ -23,7 +23,7 @@ from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlit
 from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
-    from softplc.app.runtime import Runtime
+    from softplc.core.plant import Plant
 
 log = logging.getLogger(__name__)
 
@@ -48,44 +48,44 @@ class AlarmsAdapter:
         self._undo: list[Callable[[], None]] = []
         self._running = False
 
-    async def start(self, runtime: Runtime) -> None:
-        engine = AlarmEngine(self.settings, runtime.db, runtime.clock, runtime.events.publish)
+    async def start(self, plant: Plant) -> None:
+        engine = AlarmEngine(self.settings, plant.tags, plant.clock, plant.events.publish)
         self.engine, self.actions = engine, AlarmActions(engine)
-        self.journal = await self._open_journal(runtime)
+        self.journal = await self._open_journal(plant)
         undo = self._undo
-        undo.append(runtime.events.subscribe(self.journal.record, kinds=("alarm",)))
-        undo.extend(register_alarm_commands(runtime.commands, engine, self.actions, self.journal, runtime.clock))
-        commands = runtime.commands
+        undo.append(plant.events.subscribe(self.journal.record, kinds=("alarm",)))
+        undo.extend(register_alarm_commands(plant.commands, engine, self.actions, self.journal, plant.clock))
+        commands = plant.commands
 
         async def acknowledge_all(origin: Origin) -> Any:
             return await commands.call("alarms.acknowledge_all", {"comment": "acknowledge-all tag"}, origin)
 
-        self._summary = SummaryTags(runtime.db, acknowledge_all)
-        undo.append(runtime.db.on_change(engine.note_changed))
-        undo.append(runtime.db.on_write(self._summary.note_writes))
+        self._summary = SummaryTags(plant.tags, acknowledge_all)
+        undo.append(plant.tags.on_change(engine.note_changed))
+        undo.append(plant.tags.on_write(self._summary.note_writes))
         self._running = True
-        if runtime.tasks:
-            runtime.engine.after_cycle(self._after_cycle)  # no unsubscribe: _running gates it
+        if plant.tasks:
+            undo.append(plant.after_cycle(self._after_cycle))
         else:
-            runtime.spawn(self._tick(runtime), "alarms")
+            plant.spawn(self._tick(plant), "alarms")
         log.info("alarms: %d defined; journal in %s", len(engine.alarms), self.storage.describe() if self.storage else "-")
 
-    async def _open_journal(self, runtime: Runtime) -> AlarmJournal:
-        if runtime.clock.simulated:
-            path = Path(runtime.state_dir) / SIM_JOURNAL_FILE
+    async def _open_journal(self, plant: Plant) -> AlarmJournal:
+        if plant.clock.simulated:
+            path = Path(plant.state_dir) / SIM_JOURNAL_FILE
             remove_sqlite_store(path)
             storage = StorageSettings.sqlite(path)
         else:
-            storage = StorageSettings.from_section(self.settings.journal, Path(runtime.state_dir), JOURNAL_FILE)
+            storage = StorageSettings.from_section(self.settings.journal, Path(plant.state_dir), JOURNAL_FILE)
         self.storage = storage
         database = Database(storage)
         writer = BatchWriter(database, name="alarm-journal")
-        writer.register(JournalSink(self.settings.retention, runtime.clock.wall))
+        writer.register(JournalSink(self.settings.retention, plant.clock.wall))
         error = await asyncio.to_thread(writer.start)
         if error is not None:  # the writer keeps the rows and retries: alarms work without the store
             log.error("alarm journal: cannot open %s: %s; retrying, rows are kept meanwhile", storage.describe(), error)
         self._writer = writer
-        return AlarmJournal(database, writer, runtime.config.name)
+        return AlarmJournal(database, writer, plant.name)
 
     def _after_cycle(self, task: Any) -> None:
         if self._running:
@@ -101,9 +101,9 @@ class AlarmsAdapter:
             engine.changed = False
             summary.publish(engine.active_count, engine.unacknowledged_count, engine.highest_active_priority, engine.shelved_count)
 
-    async def _tick(self, runtime: Runtime) -> None:
+    async def _tick(self, plant: Plant) -> None:
         while self._running:
-            await runtime.clock.sleep(IDLE_TICK)
+            await plant.clock.sleep(IDLE_TICK)
             self.evaluate()
 
     async def stop(self) -> None:
@@ -121,7 +121,7 @@ class AlarmsAdapter:
             self._writer = None
 
     def metrics(self) -> dict[str, Any]:
-        """Figures for /metrics (softplc/adapters/metrics/catalog.py): alarms active, unacknowledged, shelved."""
+        """Figures for /metrics (named in manifest.py): alarms active, unacknowledged, shelved."""
         engine = self.engine
         if engine is None:
             return {}

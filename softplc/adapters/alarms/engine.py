@@ -1,8 +1,8 @@
 """The alarm engine: owns every alarm's state, evaluates at scan boundaries, publishes each transition.
 
-    engine = AlarmEngine(settings, runtime.db, runtime.clock, runtime.events.publish)
-    runtime.db.on_change(engine.note_changed)      # which alarms must be looked at
-    runtime.engine.after_cycle(lambda task: engine.evaluate())
+    engine = AlarmEngine(settings, plant.tags, plant.clock, plant.events.publish)
+    plant.tags.on_change(engine.note_changed)      # which alarms must be looked at
+    plant.after_cycle(lambda task: engine.evaluate())
 
 Only alarms whose tags changed are evaluated (an index tag → alarms), plus those whose on/off
 delay, shelving or counting window falls due (a heap of timers on the runtime clock), so a

@@ -31,7 +31,7 @@ from softplc.core.expression import Condition, ExpressionError
 from softplc.config.schema import NAME_PATTERN, NAME_RULE
 from softplc.storage.settings import parse_span, storage_problems
 from softplc.util.suggest import did_you_mean
-from softplc.engine.systags import system_tag_definitions
+from softplc.config.system_tags import system_tag_definitions
 from softplc.core.tags import TagDef
 from softplc.config.yamlsource import ConfigError, Location, Problem
 

@@ -26,12 +26,11 @@ from softplc.adapters.audit.store import SINK_NAME, AuditSink
 from softplc.core.clock import Clock
 from softplc.core.commands import CommandCall, Commands
 from softplc.util.realtime import shorten_switch_interval
-from softplc.engine.scan_gate import ScanGate
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.core.tagdb import TagDatabase, WriteEvent
 
 if TYPE_CHECKING:
-    from softplc.app.runtime import Runtime
+    from softplc.core.plant import Plant, ThreadGate
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +39,7 @@ MAX_PENDING = 1_000_000
 
 
 class AuditRecorder:
-    """The audit trail around the core: `start(runtime)`, `stop()`, `describe()` (see the module docstring)."""
+    """The audit trail around the core: `start(plant)`, `stop()`, `describe()` (see the module docstring)."""
 
     name = "audit"
 
@@ -51,7 +50,7 @@ class AuditRecorder:
         self.database: Database | None = None
         self.writer: BatchWriter | None = None
         self.recorded = 0
-        self.gate: ScanGate | None = None
+        self.gate: ThreadGate | None = None
         self._sink: AuditSink | None = None
         self._db: TagDatabase | None = None
         self._commands: Commands | None = None
@@ -59,12 +58,12 @@ class AuditRecorder:
         self._clock: Clock | None = None
         self._undo: list[Callable[[], None]] = []
 
-    async def start(self, runtime: Runtime) -> None:
-        from softplc.app.runtime import AdapterError
+    async def start(self, plant: Plant) -> None:
+        from softplc.core.plant import AdapterError
 
-        self._clock = runtime.clock
-        self._simulated = simulated = runtime.clock.simulated
-        self.storage = storage = self.settings.storage(runtime.state_dir, simulated=simulated)
+        self._clock = plant.clock
+        self._simulated = simulated = plant.clock.simulated
+        self.storage = storage = self.settings.storage(plant.state_dir, simulated=simulated)
         if simulated and storage.path is not None:
             # A simulated run starts at the same simulated instant every time: its trail
             # replaces the previous run's instead of overlapping it.
@@ -75,24 +74,24 @@ class AuditRecorder:
         self.database = database = Database(storage)
         writer = BatchWriter(database, name="softplc-audit-writer", max_pending=MAX_PENDING)
         # On the real clock the writer steps aside while a scan cycle is due (softplc/engine/scan_gate.py).
-        self.gate = gate = ScanGate(runtime.engine, runtime.clock) if not simulated and runtime.tasks else None
-        self._sink = AuditSink(self.plant, partition=self.settings.partition, retention=self.settings.retention, now=runtime.clock.wall,
+        self.gate = gate = plant.gate  # None on a simulated clock
+        self._sink = AuditSink(self.plant, partition=self.settings.partition, retention=self.settings.retention, now=plant.clock.wall,
                                steps=gate.stepping if gate is not None else None)
         writer.register(self._sink)
         shorten_switch_interval()  # the writer thread builds rows and JSON in Python between its SQL calls
-        error = await runtime.clock.run_blocking(writer.start)
+        error = await plant.clock.run_blocking(writer.start)
         if error is not None:
             if not database.postgresql:
                 # A plant that runs without its audit trail must be a decision, not an accident.
-                await runtime.clock.run_blocking(writer.stop)
+                await plant.clock.run_blocking(writer.stop)
                 raise AdapterError(f"audit: cannot open {database.describe()}: {error} "
                                    "(to run without an audit trail: audit: {enabled: false} in the configuration)")
             log.error("audit: %s is unreachable (%s); entries are kept in memory (at most %d) and written when it is back",
                       database.describe(), error, MAX_PENDING)
         self.writer = writer
-        self._db, self._commands = runtime.db, runtime.commands
-        self._undo = [runtime.db.on_write(self._note_writes), runtime.commands.on_call(self._note_call)]
-        self._undo += register_audit_commands(runtime.commands, self, runtime.clock)
+        self._db, self._commands = plant.tags, plant.commands
+        self._undo = [plant.tags.on_write(self._note_writes), plant.commands.on_call(self._note_call)]
+        self._undo += register_audit_commands(plant.commands, self, plant.clock)
 
     async def stop(self) -> None:
         for undo in reversed(self._undo):

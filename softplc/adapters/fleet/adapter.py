@@ -31,7 +31,7 @@ from softplc.core.tagdb import Origin, TagDatabase
 from softplc.core.tags import Quality, Tag
 
 if TYPE_CHECKING:
-    from softplc.app.runtime import Runtime
+    from softplc.core.plant import Plant
 
 log = logging.getLogger(__name__)
 
@@ -129,7 +129,7 @@ class FleetAdapter:
         self.loops: dict[str, ControlLoop] = {}
         self.remotes: dict[str, RemoteLink] = {}
         self.trajectories: dict[str, list[Sample]] = {}
-        self._runtime: Runtime | None = None
+        self._plant: Plant | None = None
         self._tasks: list[asyncio.Task[Any]] = []
         self._unsubscribe: Any = None
         self._cleanup: list[Any] = []
@@ -155,11 +155,11 @@ class FleetAdapter:
 
     # -- adapter protocol ----------------------------------------------------------------
 
-    async def start(self, runtime: Runtime) -> None:
-        from softplc.app.runtime import AdapterError
+    async def start(self, plant: Plant) -> None:
+        from softplc.core.plant import AdapterError
 
-        self._runtime = runtime
-        db = runtime.db
+        self._plant = plant
+        db = plant.tags
         missing = [f"{robot.id}_{name}" for robot in self.robots for name in self._needed(robot) if f"{robot.id}_{name}" not in db]
         if missing:
             shown = ", ".join(missing[:8]) + (f" and {len(missing) - 8} more" if len(missing) > 8 else "")
@@ -180,8 +180,8 @@ class FleetAdapter:
         self._cleanup.append(peers.unsubscribe)
         limits = {robot.id: self.limits(robot) for robot in self.robots}
         sim = [robot for robot in self.robots if robot.driver is DriverKind.SIM]
-        planning: Planning = ClockPlanning(runtime.clock)
-        if sim and not runtime.clock.simulated:
+        planning: Planning = ClockPlanning(plant.clock)
+        if sim and not plant.clock.simulated:
             self._planning = ProcessPlanning(planners, planning)
             await self._planning.start()
             planning = self._planning
@@ -189,26 +189,26 @@ class FleetAdapter:
             pose = Pose(float(db.value(f"{robot.id}_xpos")), float(db.value(f"{robot.id}_ypos")), float(db.value(f"{robot.id}_heading")))
             driver = RobotDriver(robot, self.floor, limits[robot.id], self.driver_settings, cycle=self.cycle, pose=pose)
             record = self.trajectories.setdefault(robot.id, []) if self.record else None
-            loop = ControlLoop(driver, TagIO(db, robot.id, peers), runtime.clock, self.cycle,
+            loop = ControlLoop(driver, TagIO(db, robot.id, peers), plant.clock, self.cycle,
                                phase=(index % PHASES) * self.cycle / PHASES, record=record, planning=planning)
             self.drivers[robot.id] = driver
             self.loops[robot.id] = loop
-            self._tasks.append(runtime.spawn(loop.run(), f"robot-{robot.id}"))
+            self._tasks.append(plant.spawn(loop.run(), f"robot-{robot.id}"))
         for robot in self.robots:
             if robot.driver is DriverKind.REMOTE:
-                link = RemoteLink(db, robot, runtime.clock.now, self.heartbeat_timeout)
+                link = RemoteLink(db, robot, plant.clock.now, self.heartbeat_timeout)
                 link.go_offline("not connected yet")
                 self.remotes[robot.id] = link
                 self._watch[f"{robot.id}_report"] = (link, "report")
                 self._watch[f"{robot.id}_agent"] = (link, "agent")
             elif f"{robot.id}_agent" in db:  # an agent may try to register for it: refuse it
-                refusal = AgentRefusal(db, robot, self.robots.path, runtime.clock.now)
+                refusal = AgentRefusal(db, robot, self.robots.path, plant.clock.now)
                 self.refusals[robot.id] = refusal
                 self._watch[f"{robot.id}_agent"] = (refusal, "agent")
         if self._watch:
             self._unsubscribe = db.on_change(self._on_change)
         if self.remotes:
-            self._tasks.append(runtime.spawn(self._heartbeats(), "fleet-heartbeats"))
+            self._tasks.append(plant.spawn(self._heartbeats(), "fleet-heartbeats"))
         # The maps, planners and robots live as long as the runtime: keep them out of the
         # garbage collector's full passes (a full pass over them stalled the loop for >100 ms).
         gc.freeze()
@@ -233,10 +233,10 @@ class FleetAdapter:
         self._cleanup.clear()
 
     def metrics(self) -> dict[str, Any]:
-        """Figures for /metrics (softplc/adapters/metrics/catalog.py): robots by navigation state (offline: no good value)."""
-        if self._runtime is None:
+        """Figures for /metrics (named in manifest.py): robots by navigation state (offline: no good value)."""
+        if self._plant is None:
             return {}
-        db = self._runtime.db
+        db = self._plant.tags
         states: dict[str, int] = {}
         for robot in self.robots:
             tag = db.get(f"{robot.id}_navstate")
@@ -260,8 +260,8 @@ class FleetAdapter:
         """Where a robot is now (a remote robot: as last reported)."""
         if robot_id in self.drivers:
             return self.drivers[robot_id].pose
-        assert self._runtime is not None
-        value = self._runtime.db.value
+        assert self._plant is not None
+        value = self._plant.tags.value
         return Pose(float(value(f"{robot_id}_xpos")), float(value(f"{robot_id}_ypos")), float(value(f"{robot_id}_heading")))
 
     def trajectory(self, robot_id: str) -> list[Sample]:
@@ -289,8 +289,8 @@ class FleetAdapter:
                 link.on_agent(str(tag.value))
 
     async def _heartbeats(self) -> None:
-        assert self._runtime is not None
-        clock = self._runtime.clock
+        assert self._plant is not None
+        clock = self._plant.clock
         period = min(0.5, self.heartbeat_timeout / 4)
         while True:
             await clock.sleep(period)

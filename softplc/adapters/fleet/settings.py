@@ -6,15 +6,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from softplc.util.durations import parse_duration
 from softplc.config.yamlsource import ConfigError
+from softplc.robotics.layout import DEFAULT_MAP, DEFAULT_ROBOTS, DEFAULT_TASKS, fleet_files, fleet_section, has_fleet
+from softplc.util.durations import parse_duration
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
 
-DEFAULT_ROBOTS = "robots/robots.yaml"
-DEFAULT_TASKS = "robots/tasks.yaml"
-DEFAULT_MAP = "robots/maps/factory.yaml"
+__all__ = ["DEFAULT_MAP", "DEFAULT_ROBOTS", "DEFAULT_TASKS", "FleetSettings"]
 
 
 @dataclass(frozen=True)
@@ -35,8 +34,7 @@ class FleetSettings:
     @classmethod
     def from_config(cls, config: PlantConfig) -> FleetSettings:
         """Settings from `config.raw['fleet']` (defaults when the section is missing)."""
-        section: dict[str, Any] = config.raw.get("fleet") or {}
-        base = config.base_dir
+        section: dict[str, Any] = fleet_section(config)
         source = config.source
 
         def duration(key: str, default: float) -> float:
@@ -54,7 +52,7 @@ class FleetSettings:
                 raise ConfigError([where] if where else [])
             return seconds
 
-        files = {key: base / str(section.get(key, default)) for key, default in (("robots", DEFAULT_ROBOTS), ("tasks", DEFAULT_TASKS), ("map", DEFAULT_MAP))}
+        files = fleet_files(config)
         missing = [
             source.problem(("fleet", key) if key in section else ("fleet",), f"{key} file not found: {file}", at_key=key not in section)
             for key, file in files.items()
@@ -79,4 +77,4 @@ class FleetSettings:
     @classmethod
     def configured(cls, config: PlantConfig) -> bool:
         """True when the plant has a `fleet:` section (the adapter is started only then)."""
-        return isinstance(config.raw.get("fleet"), dict)
+        return has_fleet(config)

@@ -1,6 +1,6 @@
 """The historian's commands: how other adapters (OPC UA HistoryRead, the HMI's trends) read history.
 
-Registered by the running historian (`HistoryRecorder.start`) on `runtime.commands`, all VIEW
+Registered by the running historian (`HistoryRecorder.start`) on `plant.commands`, all VIEW
 (any role), not audited; each does its store work off the event loop (`clock.run_blocking`) and
 returns plain data (dicts, lists, numbers, strings, None; built in the worker thread too) — what `softplc.adapters.opcua.commands` sends
 as JSON to remote callers too. Times are Unix seconds on the runtime clock (simulated under
@@ -26,7 +26,7 @@ from softplc.adapters.history.reads import MAX_VALUES, InvalidContinuation, as_d
 from softplc.adapters.history.store import TagInfo
 
 if TYPE_CHECKING:
-    from softplc.app.runtime import Runtime
+    from softplc.core.plant import Plant
 
 log = logging.getLogger(__name__)
 
@@ -35,9 +35,9 @@ MAX_PLOT_POINTS = 10_000
 _RANGE = {"tag": "tag name", "start": "Unix seconds (runtime clock); omitted: open", "end": "Unix seconds; omitted: open"}
 
 
-def register_history_commands(runtime: Runtime, reader: HistoryReader, recorded: Mapping[str, TagInfo]) -> Callable[[], None]:
-    """Register the `history.*` commands over `reader`; `recorded`: the tags this runtime records. Returns an unregister."""
-    run = runtime.clock.run_blocking
+def register_history_commands(plant: Plant, reader: HistoryReader, recorded: Mapping[str, TagInfo]) -> Callable[[], None]:
+    """Register the `history.*` commands over `reader`; `recorded`: the tags this plant records. Returns an unregister."""
+    run = plant.clock.run_blocking
 
     async def blocking(function: Callable[[], Any]) -> Any:
         try:
@@ -105,17 +105,17 @@ def register_history_commands(runtime: Runtime, reader: HistoryReader, recorded:
                            "config": "{treat_uncertain_as_bad, percent_data_bad, percent_data_good} (optional)",
                            "limit": f"at most this many intervals (0: {MAX_VALUES})", "continuation": "the previous page's continuation"}
     unregister = [
-        runtime.commands.register("history.tags", tags, permission=Permission.VIEW, description="list the tags with history"),
-        runtime.commands.register("history.aggregates", aggregates, permission=Permission.VIEW,
+        plant.commands.register("history.tags", tags, permission=Permission.VIEW, description="list the tags with history"),
+        plant.commands.register("history.aggregates", aggregates, permission=Permission.VIEW,
                                   description="list the aggregates of history.read_processed"),
-        runtime.commands.register("history.read_raw", raw, permission=Permission.VIEW, description="read raw history",
+        plant.commands.register("history.read_raw", raw, permission=Permission.VIEW, description="read raw history",
                                   arguments=raw_arguments),
-        runtime.commands.register("history.read_processed", processed, permission=Permission.VIEW,
+        plant.commands.register("history.read_processed", processed, permission=Permission.VIEW,
                                   description="read aggregates of history per interval", arguments=processed_arguments),
-        runtime.commands.register("history.read_at_time", at_time, permission=Permission.VIEW, description="read history at given times",
+        plant.commands.register("history.read_at_time", at_time, permission=Permission.VIEW, description="read history at given times",
                                   arguments={"tag": "tag name", "times": "list of Unix seconds",
                                              "simple_bounds": "true: Part 13 simple bounding values", "config": "as for read_processed"}),
-        runtime.commands.register("history.plot", plot, permission=Permission.VIEW, description="read history for a trend",
+        plant.commands.register("history.plot", plot, permission=Permission.VIEW, description="read history for a trend",
                                   arguments={"tag": "tag name", "start": "Unix seconds", "end": "Unix seconds",
                                              "max_points": f"at most this many points (default {DEFAULT_PLOT_POINTS})"}),
     ]

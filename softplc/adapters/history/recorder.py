@@ -26,7 +26,7 @@ from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlit
 from softplc.core.tags import Quality, Tag
 
 if TYPE_CHECKING:
-    from softplc.app.runtime import Runtime
+    from softplc.core.plant import Plant
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +91,7 @@ class TagFilter:
 
 
 class HistoryRecorder:
-    """The historian: `start(runtime)`, `stop()`, `describe()` (see module docstring)."""
+    """The historian: `start(plant)`, `stop()`, `describe()` (see module docstring)."""
 
     name = "history"
 
@@ -107,16 +107,16 @@ class HistoryRecorder:
         self._unsubscribe: Any = None
         self._due: list[tuple[float, str]] = []  # heartbeat deadlines (runtime wall time), a heap
         self._scheduled: set[str] = set()  # tags with an entry in _due (one each, so the heap stays small)
-        self._runtime: Runtime | None = None
+        self._plant: Plant | None = None
         self._reader: HistoryReader | None = None
         self._unregister: Any = None
 
-    async def start(self, runtime: Runtime) -> None:
-        from softplc.app.runtime import AdapterError
+    async def start(self, plant: Plant) -> None:
+        from softplc.core.plant import AdapterError
 
-        self._runtime = runtime
-        simulated = runtime.clock.simulated
-        self.storage = self.settings.storage(runtime.state_dir, simulated=simulated)
+        self._plant = plant
+        simulated = plant.clock.simulated
+        self.storage = self.settings.storage(plant.state_dir, simulated=simulated)
         if simulated and self.storage.path is not None:
             # A simulated run starts at the same simulated instant every time: its history
             # replaces the previous run's instead of overlapping it.
@@ -130,23 +130,23 @@ class HistoryRecorder:
         writer = BatchWriter(database, name="softplc-history-writer")
         writer.register(sink)
         shorten_switch_interval()  # the writer thread builds rows in Python between its SQL calls
-        error = await runtime.clock.run_blocking(writer.start)
+        error = await plant.clock.run_blocking(writer.start)
         if error is not None:
             if not database.postgresql:
-                await runtime.clock.run_blocking(writer.stop)
+                await plant.clock.run_blocking(writer.stop)
                 raise AdapterError(f"history: cannot open {database.describe()}: {error}")
             log.warning("history: %s is unreachable (%s); recording continues in memory and is written when it is back", database.describe(), error)
         self.writer = writer
-        # Reads for other adapters (OPC UA HistoryRead, trends) go through runtime.commands.
+        # Reads for other adapters (OPC UA HistoryRead, trends) go through plant.commands.
         self._reader = HistoryReader(database, self.plant)
-        self._unregister = register_history_commands(runtime, self._reader, {info.name: info for info in infos if info.name in runtime.db})
-        db = runtime.db
+        self._unregister = register_history_commands(plant, self._reader, {info.name: info for info in infos if info.name in plant.tags})
+        db = plant.tags
         self.filters = {name: TagFilter(name, policy, self.types[name][0] != "string" and not self.types[name][0] == "bool")
                         for name, policy in self.policies.items() if name in db}
         self._changed([db[name] for name in self.filters])  # the starting values
         self._unsubscribe = db.on_change(self._changed)
         if any(f.door is not None and math.isfinite(f.door.max_interval) for f in self.filters.values()):
-            runtime.spawn(self._heartbeats(), "history-heartbeat")
+            plant.spawn(self._heartbeats(), "history-heartbeat")
 
     async def stop(self) -> None:
         if self._unsubscribe is not None:
@@ -155,8 +155,8 @@ class HistoryRecorder:
         if self._unregister is not None:
             self._unregister()
             self._unregister = None
-        if self._reader is not None and self._runtime is not None:
-            await self._runtime.clock.run_blocking(self._reader.close)
+        if self._reader is not None and self._plant is not None:
+            await self._plant.clock.run_blocking(self._reader.close)
             self._reader = None
         writer = self.writer
         if writer is None:
@@ -165,18 +165,18 @@ class HistoryRecorder:
         for tag_filter in self.filters.values():
             rows += tag_filter.release()
         writer.put(SINK_NAME, rows)
-        assert self._runtime is not None
-        await self._runtime.clock.run_blocking(writer.stop)
+        assert self._plant is not None
+        await self._plant.clock.run_blocking(writer.stop)
         self.writer = None
 
     def describe(self) -> str:
         where = self.storage.describe() if self.storage else "?"
-        sim = " (simulated time)" if self._runtime is not None and self._runtime.clock.simulated else ""
+        sim = " (simulated time)" if self._plant is not None and self._plant.clock.simulated else ""
         period = self.storage.flush_period if self.storage else 0.0
         return f"history: recording {len(self.filters)} tags to {where}{sim}, flushed every {period:g} s"
 
     def metrics(self) -> dict[str, Any]:
-        """Figures for /metrics (softplc/adapters/metrics/catalog.py): rows written, the queue's depth, drops, failed commits."""
+        """Figures for /metrics (named in manifest.py): rows written, the queue's depth, drops, failed commits."""
         writer = self.writer
         if writer is None:
             return {}
@@ -208,8 +208,8 @@ class HistoryRecorder:
             self.writer.put(SINK_NAME, rows)
 
     async def _heartbeats(self) -> None:
-        assert self._runtime is not None
-        clock = self._runtime.clock
+        assert self._plant is not None
+        clock = self._plant.clock
         while True:
             await clock.sleep(HEARTBEAT_TICK)
             now = clock.wall()

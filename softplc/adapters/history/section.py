@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from softplc.adapters.history.settings import HISTORY_SCHEMA, RULE_SCHEMA, problems, tag_rule
 from softplc.config.schema import Section
-from softplc.engine.systags import runtime_tag_definitions
+from softplc.config.system_tags import runtime_tag_definitions
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

@@ -219,7 +219,7 @@ def problems(config: PlantConfig, definitions: Sequence[TagDef] | None = None) -
     if not isinstance(section, Mapping) or source is None:
         return []
     if definitions is None:
-        from softplc.engine.systags import system_tag_definitions
+        from softplc.config.system_tags import system_tag_definitions
 
         definitions = [*config.tags, *system_tag_definitions(config.tasks)]
     found = storage_problems(section, ("history",), source) + span_problems(section, ("history",), source)

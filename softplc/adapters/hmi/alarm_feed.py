@@ -13,7 +13,7 @@ and the summary:
     {"type": "alarms", "time": T, "alarms": [...], "transitions": [{alarm, transition, time, state, previous,
      priority, user, comment}], "dropped": 0, "summary": {active, unacknowledged, shelved, highest_priority, ...}}
 
-It listens to `runtime.events` (kind "alarm"): the engine publishes each transition inside the
+It listens to `plant.events` (kind "alarm"): the engine publishes each transition inside the
 scan, and the listener only notes it; a message is encoded once, in a turn (pacing.py), and the
 same bytes go to every page that asked. A client that does not read its messages is not fed a
 backlog: it gets a fresh snapshot once it has caught up. Lists and the summary come from the

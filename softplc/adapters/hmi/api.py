@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from softplc.adapters.hmi.shell import Shell
     from softplc.adapters.hmi.views import View
     from softplc.adapters.hmi.writelog import WriteLog
-    from softplc.app.runtime import Runtime
+    from softplc.core.plant import Plant
 
 
 class HmiServer(Protocol):
@@ -52,10 +52,10 @@ class HmiServer(Protocol):
 
     config: PlantConfig
     settings: HmiSettings
-    runtime: Runtime
+    plant: Plant
     sessions: Sessions
     hub: Hub
-    plant: PlantModel
+    overview: PlantModel
     shell: Shell
     origins: OriginPolicy
     views: dict[str, View]
@@ -129,8 +129,8 @@ class Api:
             "plant": {"name": server.config.name, "description": server.config.description},
             "version": __version__,
             "instance": server.hub.instance,
-            "simulated": server.runtime.clock.simulated,
-            "speed": getattr(server.runtime.clock, "speed", None),
+            "simulated": server.plant.clock.simulated,
+            "speed": getattr(server.plant.clock, "speed", None),
             "anonymous": server.settings.anonymous_role.value if server.settings.anonymous_role else None,
             "login_required": identity is None,
             "user": None,
@@ -184,7 +184,7 @@ class Api:
 
     async def tags(self, request: web.Request) -> web.Response:
         identity = self.who(request)
-        db = self.server.runtime.db
+        db = self.server.plant.tags
         query = request.query
         group, prefix = query.get("group"), query.get("prefix")
         text = query.get("q", "").casefold()
@@ -209,7 +209,7 @@ class Api:
 
     async def tag(self, request: web.Request) -> web.Response:
         identity = self.who(request)
-        db = self.server.runtime.db
+        db = self.server.plant.tags
         name = request.match_info["name"]
         tag = db.get(name)
         if tag is None:
@@ -218,7 +218,7 @@ class Api:
 
     async def write(self, request: web.Request) -> web.Response:
         server = self.server
-        db = server.runtime.db
+        db = server.plant.tags
         peer = peer_host(request.remote)
         try:
             body = await request.json()
@@ -261,15 +261,14 @@ class Api:
         ok = all(result is not None and result["ok"] for result in results)
         return web.json_response({"ok": ok, "results": results}, status=200 if ok else 422)
 
-    # -- runtime, plant, robots, views ------------------------------------------------------------
+    # -- tasks, plant, robots, views ---------------------------------------------------------------
 
     async def tasks(self, request: web.Request) -> web.Response:
         identity = self.who(request)
-        runtime = self.server.runtime
-        db = runtime.db
-        references = {program.name: program.reference for task in runtime.config.tasks for program in task.programs}
+        plant = self.server.plant
+        db = plant.tags
         tasks = []
-        for task in runtime.tasks:
+        for task in plant.tasks:
             prefix = f"_sys.{task.name}."
             tasks.append({
                 "name": task.name,
@@ -277,7 +276,7 @@ class Api:
                 "priority": task.priority,
                 "watchdog_ms": task.watchdog * 1e3,
                 "prefix": prefix,
-                "programs": [{"name": program.name, "program": references.get(program.name, type(program.program).__name__),
+                "programs": [{"name": program.name, "program": program.reference,
                               "prefix": f"{prefix}{program.name}."} for program in task.programs],
             })
         return web.json_response({
@@ -291,18 +290,18 @@ class Api:
 
     async def plant(self, request: web.Request) -> web.Response:
         self.who(request)
-        return web.json_response(self.server.plant.describe())
+        return web.json_response(self.server.overview.describe())
 
     async def map_image(self, request: web.Request) -> web.Response:
         self.who(request)
-        image = self.server.plant.map
+        image = self.server.overview.map
         if image is None:
             raise web.HTTPNotFound(text="this plant has no map")
         return web.Response(body=image.png, content_type="image/png", headers={"Cache-Control": "private, max-age=3600"})
 
     async def robots(self, request: web.Request) -> web.Response:
         self.who(request)
-        plant = self.server.plant
+        plant = self.server.overview
         return web.json_response({"robots": plant.robots, "tasks": plant.tasks, "compatibility": plant.compatibility})
 
     async def views(self, request: web.Request) -> web.Response:

@@ -28,7 +28,7 @@ def audit_routes(server: HmiServer) -> list[web.RouteDef]:
         identity = server.sessions.identify(request)
         if identity is None:
             raise web.HTTPUnauthorized(text="log in first (POST /api/login)")
-        commands = server.runtime.commands
+        commands = server.plant.commands
         if "audit.query" not in commands:
             raise web.HTTPNotFound(text="this runtime keeps no audit trail (audit: enabled: false, or --no-audit)")
         arguments: dict[str, Any] = {key: request.query[key] for key in TEXT_FILTERS if request.query.get(key)}
@@ -55,7 +55,7 @@ def audit_routes(server: HmiServer) -> list[web.RouteDef]:
 
         stream = io.StringIO()
         write_csv((AuditEntry.from_dict(row) for row in rows), stream)
-        stamp = server.runtime.clock.wall()
+        stamp = server.plant.clock.wall()
         return web.Response(text=stream.getvalue(), content_type="text/csv", charset="utf-8", headers={
             "Content-Disposition": f'attachment; filename="audit-{int(stamp)}.csv"'})
 

@@ -7,7 +7,7 @@
                                  is not a JSON object, 422 any other refusal, in the runtime's words (an
                                  online change's refusal adds `details`: differences, located problems)
 
-Every call goes through `runtime.commands.call` with `Origin("hmi", user, peer, role)`: the
+Every call goes through `plant.commands.call` with `Origin("hmi", user, peer, role)`: the
 registry checks the role and reports the call (the audit trail), exactly as for OPC UA and the
 CLI. Commands that only read (`Permission.VIEW`: alarm lists, history) are open to whoever may
 look at the HMI, the anonymous viewer included; every other command needs a login and the
@@ -51,7 +51,7 @@ class CommandDoor:
         identity = self.server.sessions.identify(request)
         if identity is None:
             raise web.HTTPUnauthorized(text="log in first (POST /api/login)")
-        commands = self.server.runtime.commands
+        commands = self.server.plant.commands
         rows = []
         for name in commands.names():
             command = commands.get(name)
@@ -70,7 +70,7 @@ class CommandDoor:
         arguments, problem = await _arguments(request)
         if problem:
             return json_response({"ok": False, "command": name, "error": problem}, status=400)
-        commands = server.runtime.commands
+        commands = server.plant.commands
         command = commands.get(name)
         peer = peer_host(request.remote)
         if command is not None and command.permission is not Permission.VIEW:
@@ -100,7 +100,7 @@ class CommandDoor:
             log.exception("HMI: command %s failed", name)
             return json_response({"ok": False, "command": name, "error": f"{name} failed: {error}"}, status=500)
         self._note(origin, name, command, True, result if isinstance(result, str) else "")
-        return json_response({"ok": True, "command": name, "result": result, "time": round(server.runtime.clock.wall(), 3)})
+        return json_response({"ok": True, "command": name, "result": result, "time": round(server.plant.clock.wall(), 3)})
 
     def _note(self, origin: Origin, name: str, command: Any, accepted: bool, detail: str) -> None:
         if command is not None and command.permission is not Permission.VIEW:

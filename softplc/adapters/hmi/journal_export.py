@@ -40,7 +40,7 @@ class JournalExport:
         identity = server.sessions.identify(request)
         if identity is None:
             raise web.HTTPUnauthorized(text="log in first (POST /api/login)")
-        if "alarms.journal" not in server.runtime.commands:
+        if "alarms.journal" not in server.plant.commands:
             raise web.HTTPNotFound(text="this runtime keeps no alarm journal (no alarms: section)")
         query = request.query
         arguments: dict[str, Any] = {key: _time_or_text(query[key]) if key in ("since", "until") else query[key]
@@ -51,14 +51,14 @@ class JournalExport:
         rows: list[dict[str, Any]] = []
         try:
             while len(rows) < MAX_ROWS:
-                page = await server.runtime.commands.call("alarms.journal", {**arguments, "limit": PAGE, "offset": len(rows)}, origin)
+                page = await server.plant.commands.call("alarms.journal", {**arguments, "limit": PAGE, "offset": len(rows)}, origin)
                 rows.extend(page)
                 if len(page) < PAGE:
                     break
         except CommandRefused as refused:
             raise web.HTTPBadRequest(text=str(refused)) from None
         text = await asyncio.to_thread(_csv, rows)
-        stamp = datetime.fromtimestamp(server.runtime.clock.wall(), timezone.utc).strftime("%Y%m%d-%H%M%S")
+        stamp = datetime.fromtimestamp(server.plant.clock.wall(), timezone.utc).strftime("%Y%m%d-%H%M%S")
         return web.Response(text=text, content_type="text/csv", charset="utf-8",
                             headers={"Content-Disposition": f'attachment; filename="alarm-journal-{stamp}.csv"'})
 

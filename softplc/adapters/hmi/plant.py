@@ -63,15 +63,15 @@ class PlantModel:
 
     def _load_fleet(self, config: PlantConfig, names: set[str]) -> None:
         from softplc.robotics.compat import incompatibilities
+        from softplc.robotics.layout import fleet_files, has_fleet
         from softplc.robotics.robots import load_robots, load_tasks
-        from softplc.adapters.fleet.settings import FleetSettings
 
-        if not FleetSettings.configured(config):
+        if not has_fleet(config):
             return
-        settings = FleetSettings.from_config(config)
-        robots = load_robots(settings.robots)
-        tasks = load_tasks(settings.tasks) if settings.tasks.is_file() else None
-        self.map = render_map(settings.map) if settings.map.is_file() else None
+        files = fleet_files(config)  # `softplc check` has told of a missing file already
+        robots = load_robots(files["robots"])
+        tasks = load_tasks(files["tasks"]) if files["tasks"].is_file() else None
+        self.map = render_map(files["map"]) if files["map"].is_file() else None
         for robot in robots:
             self.robots.append({
                 "id": robot.id,

@@ -6,7 +6,7 @@ database: snapshots to read, `db.on_change` to follow, `db.submit` to write.
 
     hmi = HmiServer(config, HmiSettings(port=0))
     runtime.add_adapter(hmi)
-    await runtime.start()
+    await runtime.start()                # the HMI is handed the plant API (softplc/core/plant.py)
     hmi.url          "http://127.0.0.1:54321/"
 """
 
@@ -27,6 +27,8 @@ from softplc.adapters.hmi.journal_export import JournalExport
 from softplc.adapters.hmi.assets import AssetsNotFound, find_assets
 from softplc.adapters.hmi.expressions import ExpressionTable
 from softplc.adapters.hmi.live import Hub
+from softplc.adapters.hmi.metrics_route import MetricsRoute
+from softplc.adapters.hmi.metrics_settings import MetricsSettings
 from softplc.adapters.hmi.operations import install_operations
 from softplc.adapters.hmi.plant import PlantModel
 from softplc.adapters.hmi.security import OriginPolicy, middleware
@@ -42,7 +44,7 @@ from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.app.runtime import Runtime
+    from softplc.core.plant import Plant
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +52,7 @@ MAX_REQUEST_BYTES = 1024 * 1024
 
 
 class HmiServer:
-    """Adapter: the web HMI of one runtime."""
+    """Adapter: the web HMI of one plant."""
 
     name = "hmi"
 
@@ -64,6 +66,8 @@ class HmiServer:
         self.views: dict[str, View] = {view.name: view for view in views}
         self.shell = Shell()
         install_operations(self)  # forcing, program control, online change, the audit page (operations.py)
+        self.metrics_route = MetricsRoute(self, MetricsSettings.from_config(config))  # /metrics (servers.hmi.metrics)
+        self.plant: Plant | None = None  # the plant API, once started
         self.url = ""
         self.port: int | None = None
         self.assets: Path | None = None
@@ -72,38 +76,39 @@ class HmiServer:
 
     # -- lifecycle ----------------------------------------------------------------------------
 
-    async def start(self, runtime: Runtime) -> None:
-        from softplc.app.runtime import AdapterError
+    async def start(self, plant: Plant) -> None:
+        from softplc.core.plant import AdapterError
 
         settings = self.settings
-        self.runtime = runtime
-        db = runtime.db
+        self.plant = plant
+        self.metrics_route.load_token(plant.state_dir)
+        db = plant.tags
         try:
             self.assets = find_assets()
         except AssetsNotFound as error:
             raise AdapterError(str(error)) from None
         try:
-            users = UserStore(settings.users_path(runtime.state_dir))
+            users = UserStore(settings.users_path(plant.state_dir))
         except ConfigError as error:
             raise AdapterError(f"HMI users file is invalid:\n{error}") from None
         self.sessions = Sessions(users, PasswordLogins(users, service="HMI"), anonymous_role=settings.anonymous_role,
                                  timeout=settings.session_timeout, secure=settings.tls)
         # Reading robots, tasks and drawing the map takes a moment: not on the loop.
-        self.plant = await asyncio.to_thread(PlantModel, self.config, db)
+        self.overview = await asyncio.to_thread(PlantModel, self.config, db)
         conditions = {key: condition for view in self.views.values() for key, condition in view.expressions.items()}
-        self.expressions = ExpressionTable(db, conditions, runtime.clock.wall)
-        self.hub = Hub(db, self.expressions, runtime.clock, rate=settings.max_update_rate, heartbeat=settings.heartbeat,
+        self.expressions = ExpressionTable(db, conditions, plant.clock.wall)
+        self.hub = Hub(db, self.expressions, plant.clock, rate=settings.max_update_rate, heartbeat=settings.heartbeat,
                        max_clients=settings.max_clients)
         self.origins = OriginPolicy(settings.allowed_origins, extra_hosts=(settings.host.lower(),))
-        self.shell.pages[:0] = builtin_pages(self.plant.has_fleet, [(view.name, view.title) for view in self.views.values()])
-        add_supervisory(self.shell, runtime.commands, self.assets)  # alarms, journal, trends: when the runtime has them
-        if "alarms.summary" in runtime.commands:
-            self.hub.alarm_feed = AlarmFeed(runtime.commands, runtime.events, self.hub.pacer, runtime.clock.wall,
+        self.shell.pages[:0] = builtin_pages(self.overview.has_fleet, [(view.name, view.title) for view in self.views.values()])
+        add_supervisory(self.shell, plant.commands, self.assets)  # alarms, journal, trends: when the runtime has them
+        if "alarms.summary" in plant.commands:
+            self.hub.alarm_feed = AlarmFeed(plant.commands, plant.events, self.hub.pacer, plant.clock.wall,
                                             rate=settings.max_update_rate)
         self.writelog = WriteLog()
         self.shell.started = True
         app = self._application()
-        ssl_context = await self._ssl_context(runtime) if settings.tls else None
+        ssl_context = await self._ssl_context(plant) if settings.tls else None
         runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=2.0)
         await runner.setup()
         site = web.TCPSite(runner, settings.host, settings.port, ssl_context=ssl_context, reuse_address=True)
@@ -139,7 +144,7 @@ class HmiServer:
             self.sessions.close()
 
     def metrics(self) -> dict[str, Any]:
-        """Figures for /metrics (softplc/adapters/metrics/catalog.py): live clients, sessions, drops, messages encoded."""
+        """Figures for /metrics (named in manifest.py): live clients, sessions, drops, messages encoded."""
         if self._runner is None:
             return {}
         hub = self.hub
@@ -152,7 +157,8 @@ class HmiServer:
         users = self.sessions.users if self._runner is not None else None
         count = len(users.entries()) if users is not None else 0
         where = users.path if users is not None else "users file"
-        return f"HMI on {self.url or settings.host} (open it in a browser; {anonymous}; {count} users in {where})"
+        line = f"HMI on {self.url or settings.host} (open it in a browser; {anonymous}; {count} users in {where})"
+        return f"{line}\n{self.metrics_route.describe()}" if self._runner is not None and self.metrics_route.served else line
 
     # -- parts of start -------------------------------------------------------------------------
 
@@ -169,22 +175,23 @@ class HmiServer:
         app.add_routes(CommandDoor(self).routes())
         app.add_routes(JournalExport(self).routes())
         app.add_routes(self.shell.routes)
+        app.add_routes(self.metrics_route.routes())
         app.router.add_static("/static/", self.assets, follow_symlinks=False)
         modules = self.assets / "node_modules"
         if modules.is_dir():  # third-party front-end libraries, installed by `npm ci` (hmi/package.json)
             app.router.add_static("/vendor/", modules, follow_symlinks=False)
         return app
 
-    async def _ssl_context(self, runtime: Runtime) -> Any:
+    async def _ssl_context(self, plant: Plant) -> Any:
         from softplc.adapters.hmi.tls import ensure_certificate, server_context
-        from softplc.app.runtime import AdapterError
+        from softplc.core.plant import AdapterError
 
         settings = self.settings
         try:
             if settings.certificate is not None and settings.private_key is not None:
                 certificate, key = settings.certificate, settings.private_key
             else:
-                certificate, key = await asyncio.to_thread(ensure_certificate, settings.tls_dir(runtime.state_dir), [settings.host])
+                certificate, key = await asyncio.to_thread(ensure_certificate, settings.tls_dir(plant.state_dir), [settings.host])
             return server_context(certificate, key)
         except (OSError, ValueError) as error:
             raise AdapterError(f"HMI TLS certificate: {error}") from None

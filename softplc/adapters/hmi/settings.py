@@ -8,14 +8,14 @@ returns located `Problem`s for `softplc check` and `softplc run`. Nothing here i
 
 from __future__ import annotations
 
-import argparse
 import ipaddress
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from softplc.util.addresses import is_host
 from softplc.util.durations import parse_duration
-from softplc.adapters.metrics.settings import METRICS_SCHEMA, metrics_problems
+from softplc.adapters.hmi.metrics_settings import METRICS_SCHEMA, metrics_problems
 from softplc.core.roles import Role
 
 if TYPE_CHECKING:
@@ -59,7 +59,7 @@ HMI_SERVER: dict[str, Any] = {
             "items": {"type": "string"},
             "description": "Other origins allowed to open the live channel and write, e.g. https://scada.example.com behind a reverse proxy.",
         },
-        "metrics": METRICS_SCHEMA,  # /metrics on this server (softplc/adapters/metrics/settings.py)
+        "metrics": METRICS_SCHEMA,  # /metrics on this server (softplc/adapters/hmi/metrics_settings.py)
     },
     "additionalProperties": False,
 }
@@ -296,24 +296,3 @@ def _seconds(value: Any, default: float) -> float:
         return parse_duration(value)
     except (TypeError, ValueError):
         return default
-
-
-def is_host(text: str) -> bool:
-    """An IP address or a syntactically valid host name (nothing is looked up)."""
-    from softplc.adapters.modbus.settings import is_host as modbus_is_host  # one definition for every server
-
-    return modbus_is_host(text)
-
-
-def host_name(text: str) -> str:
-    """argparse type for --hmi-host."""
-    if not is_host(text):
-        raise argparse.ArgumentTypeError(f"not an IP address or host name: {text!r}")
-    return text
-
-
-def port_number(text: str) -> int:
-    """argparse type for --hmi-port: 0..65535 (0 = any free port)."""
-    from softplc.adapters.modbus.settings import port_number as modbus_port
-
-    return modbus_port(text)

@@ -2,14 +2,12 @@
 
 The browser builds its navigation from `GET /api/session` (`pages`), loads a page's ES module
 when it is opened (`module`, with the page's `params`), and loads every `banners` module into
-the slot under the header on every page. Other adapters extend the HMI before the runtime
-starts, without touching its code:
+the slot under the header on every page. The HMI's own modules add what the plant has when it
+starts (supervisory.py: alarms, journal and trends when their commands exist; operations.py):
 
-    hmi = next(a for a in runtime.adapters if a.name == "hmi")
-    hmi.shell.add_page(Page("trends", "Trends", "/static/js/pages/trends.js", order=40))
-    hmi.shell.add_banner("/static/js/banners/alarms.js")      # e.g. the alarm banner
-    hmi.shell.add_routes([web.get("/api/trends", handler)])   # e.g. the historian's API
-    hmi.shell.add_routes([web.get("/metrics", metrics)])      # outside /api/ too
+    shell.add_page(Page("trends", "Trends", "/static/js/pages/trends.js", order=40))
+    shell.add_banner("/static/js/banners/alarms.js")      # e.g. the alarm banner
+    shell.add_routes([web.get("/api/audit.csv", handler)])   # e.g. the audit export
 
 A page module exports `mount(root, context)` and returns a function that unmounts it
 (hmi/js/pages/*.js are examples; docs/hmi.md describes `context`).

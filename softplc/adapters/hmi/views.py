@@ -72,7 +72,7 @@ def view_problems(config: PlantConfig) -> list[Problem]:
 
 def load_views(config: PlantConfig) -> tuple[list[View], list[Problem]]:
     """The views of `hmi: views:`, and the problems found on the way (views with problems are left out)."""
-    from softplc.engine.systags import system_tag_definitions
+    from softplc.config.system_tags import system_tag_definitions
 
     section = config.raw.get("hmi")
     views_section = section.get("views") if isinstance(section, dict) else None

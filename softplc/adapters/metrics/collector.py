@@ -1,39 +1,37 @@
 """Everything `/metrics` shows, read at scrape time (a prometheus_client collector).
 
-Core figures come from what the runtime keeps anyway: each task's timing windows and counters
-(histograms.py), the programs' states and faults, the runtime's state, the forces, and the write
+Core figures come from what the plant keeps anyway: each task's timing windows and counters
+(histograms.py), the programs' states and faults, the plant's state, the forces, and the write
 and command counters (counters.py). Each adapter with a `metrics()` method adds its own figures
-(catalog.py). The metric names, types and labels are listed in docs/operations.md ("Metrics").
+(`plant.figures()`), named by its manifest. The metric names, types and labels are listed in
+docs/operations.md ("Metrics").
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, HistogramMetricFamily, Metric
 from prometheus_client.registry import Collector
 
 from softplc import __version__
-from softplc.adapters.metrics.catalog import figure_of
 from softplc.adapters.metrics.counters import CommandCounts, WriteCounts
 from softplc.adapters.metrics.histograms import LATENCY_BUCKETS, SCAN_BUCKETS, SeriesHistogram, cycle_buckets
-from softplc.engine.program_instance import ProgramState
-
-if TYPE_CHECKING:
-    from softplc.app.runtime import Runtime
-    from softplc.engine.scan import Task
+from softplc.config.manifest import figure_of
+from softplc.core.plant import Plant, TaskView
 
 log = logging.getLogger(__name__)
 
 RUNTIME_STATES = ("STARTING", "RUNNING", "ERROR", "STOPPING", "STOPPED")
+PROGRAM_STATES = ("RUNNING", "FAULTED", "STOPPED")
 
 
 class _TaskFigures:
     """One task's histograms and running counters (monotonic across `_sys.reset_stats`)."""
 
-    def __init__(self, task: Task) -> None:
+    def __init__(self, task: TaskView) -> None:
         self.scan = SeriesHistogram(SCAN_BUCKETS)
         self.cycle = SeriesHistogram(cycle_buckets(task.interval))
         self.latency = SeriesHistogram(LATENCY_BUCKETS)
@@ -42,7 +40,7 @@ class _TaskFigures:
         self._seen = (0, 0)
         self._resets = 0
 
-    def update(self, task: Task) -> None:
+    def update(self, task: TaskView) -> None:
         stats = task.stats
         for histogram, series in ((self.scan, stats.scan), (self.cycle, stats.cycle), (self.latency, stats.latency)):
             histogram.update(series, stats.resets)
@@ -53,15 +51,14 @@ class _TaskFigures:
         self._seen = (stats.overruns, stats.watchdog_trips)
 
 
-class RuntimeCollector(Collector):
+class PlantCollector(Collector):
     """The plant's metrics, computed when Prometheus asks."""
 
-    def __init__(self, runtime: Runtime, writes: WriteCounts, calls: CommandCounts) -> None:
-        self.runtime = runtime
+    def __init__(self, plant: Plant, writes: WriteCounts, calls: CommandCounts) -> None:
+        self.plant = plant
         self.writes = writes
         self.calls = calls
         self._tasks: dict[str, _TaskFigures] = {}
-        self._failing: set[str] = set()  # adapters whose metrics() raised (logged once)
 
     def describe(self) -> list[Metric]:
         return []  # registering must not collect (the runtime may not run yet)
@@ -76,16 +73,16 @@ class RuntimeCollector(Collector):
     # -- the core ---------------------------------------------------------------------------
 
     def _runtime(self) -> Iterator[Metric]:
-        runtime = self.runtime
+        plant = self.plant
         info = GaugeMetricFamily("softplc_info", "The plant this runtime runs (value 1)", labels=["plant", "version", "simulated"])
-        info.add_metric([runtime.config.name, __version__, "true" if runtime.clock.simulated else "false"], 1)
+        info.add_metric([plant.name, __version__, "true" if plant.clock.simulated else "false"], 1)
         yield info
         state = GaugeMetricFamily("softplc_runtime_state", "The runtime's state (1 for the current one)", labels=["state"])
         for name in RUNTIME_STATES:
-            state.add_metric([name], 1 if runtime.state.value == name else 0)
+            state.add_metric([name], 1 if plant.state == name else 0)
         yield state
-        yield GaugeMetricFamily("softplc_tags", "Tags in the tag database", value=len(runtime.db))
-        yield GaugeMetricFamily("softplc_forced_tags", "Tags forced by an engineer", value=len(runtime.db.forces))
+        yield GaugeMetricFamily("softplc_tags", "Tags in the tag database", value=len(plant.tags))
+        yield GaugeMetricFamily("softplc_forced_tags", "Tags forced by an engineer", value=len(plant.tags.forces))
 
     def _task_figures(self) -> Iterator[Metric]:
         scan = HistogramMetricFamily("softplc_task_scan_seconds", "Time a task's cycle takes (journal, programs, commit)", labels=["task"])
@@ -94,7 +91,7 @@ class RuntimeCollector(Collector):
         interval = GaugeMetricFamily("softplc_task_interval_seconds", "A task's configured interval", labels=["task"])
         overruns = CounterMetricFamily("softplc_task_overruns", "Releases skipped because a cycle ran past them", labels=["task"])
         trips = CounterMetricFamily("softplc_task_watchdog_trips", "Cycles longer than the task's watchdog", labels=["task"])
-        for task in self.runtime.tasks:
+        for task in self.plant.tasks:
             figures = self._tasks.get(task.name)
             if figures is None:
                 figures = self._tasks[task.name] = _TaskFigures(task)
@@ -109,10 +106,10 @@ class RuntimeCollector(Collector):
     def _programs(self) -> Iterator[Metric]:
         state = GaugeMetricFamily("softplc_program_state", "A program's state (1 for the current one)", labels=["task", "program", "state"])
         faults = CounterMetricFamily("softplc_program_faults", "Faults of a program since the runtime started", labels=["task", "program"])
-        for task in self.runtime.tasks:
+        for task in self.plant.tasks:
             for instance in task.programs:
-                for name in ProgramState:
-                    state.add_metric([task.name, instance.name, name.value], 1 if instance.state is name else 0)
+                for name in PROGRAM_STATES:
+                    state.add_metric([task.name, instance.name, name], 1 if instance.state.value == name else 0)
                 faults.add_metric([task.name, instance.name], instance.faults)
         yield from (state, faults)
 
@@ -131,18 +128,7 @@ class RuntimeCollector(Collector):
 
     def _adapters(self) -> Iterator[Metric]:
         families: dict[str, Any] = {}
-        for adapter in self.runtime.adapters:
-            report = getattr(adapter, "metrics", None)
-            if not callable(report):
-                continue
-            name = str(getattr(adapter, "name", type(adapter).__name__))
-            try:
-                figures = report()
-            except Exception:  # one adapter's bug must not take the other figures down
-                if name not in self._failing:
-                    self._failing.add(name)
-                    log.exception("metrics: the %s adapter's metrics() failed; its figures are left out", name)
-                continue
+        for name, figures in self.plant.figures().items():
             for key, value in figures.items():
                 self._add(families, name, key, value)
         yield from families.values()

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from softplc.engine.stats import TimingSeries
+from softplc.core.stats import TimingSeries
 
 # Seconds: a scan of a soft PLC takes 10 µs .. 100 ms; a stall is counted in +Inf.
 SCAN_BUCKETS = (0.00005, 0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0)

@@ -30,7 +30,7 @@ from softplc.config.plant import SYSTEM_PREFIX, PlantConfig
 from softplc.core.datatypes import DataType
 from softplc.adapters.modbus.codec import REGISTER_TYPES, RegisterCodec, register_words
 from softplc.adapters.modbus.settings import ModbusSettings
-from softplc.engine.systags import runtime_tag_definitions
+from softplc.config.system_tags import runtime_tag_definitions
 from softplc.core.tags import Access, TagDef
 from softplc.config.yamlsource import ConfigError, Location, Problem, SourceMap
 

@@ -37,7 +37,7 @@ from softplc.adapters.modbus.identification import device_objects, identificatio
 from softplc.adapters.modbus.image import RegisterImage
 from softplc.adapters.modbus.requests import LIMITS, RequestGuard, guarded_requests
 from softplc.adapters.modbus.settings import ModbusSettings, settings_problems
-from softplc.app.runtime import AdapterError, Runtime
+from softplc.core.plant import AdapterError, Plant
 from softplc.core.tagdb import Origin, Rule, TagDatabase
 from softplc.config.yamlsource import ConfigError
 
@@ -85,11 +85,11 @@ class ModbusAdapter:
     def host(self) -> str:
         return self.settings.host
 
-    async def start(self, runtime: Runtime) -> None:
-        db = runtime.db
+    async def start(self, plant: Plant) -> None:
+        db = plant.tags
         missing = [mapping.name for mapping in self.map.mappings if mapping.name not in db]
         if missing:
-            raise AdapterError(f"Modbus map names tags the runtime does not have: {', '.join(missing[:5])}")
+            raise AdapterError(f"Modbus map names tags the plant does not have: {', '.join(missing[:5])}")
         settings = self.settings
         _probe_port(settings.host, settings.port)
         self._db = db
@@ -129,7 +129,7 @@ class ModbusAdapter:
         return self._server.counts
 
     def metrics(self) -> dict[str, Any]:
-        """Figures for /metrics (softplc/adapters/metrics/catalog.py): connections and requests."""
+        """Figures for /metrics (named in manifest.py): connections and requests."""
         server = self._server
         if server is None:
             return {}

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import argparse
-import ipaddress
-import re
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
+from softplc.util.addresses import is_host
 from softplc.util.durations import parse_duration
 
 if TYPE_CHECKING:
@@ -91,27 +89,6 @@ def settings_problems(config: PlantConfig) -> list[Problem]:
     return [config.problem(("servers", "modbus", key), message) for key, message in found]
 
 
-_HOST_LABEL = re.compile(r"^[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?$")
-
-
-def is_host(text: str) -> bool:
-    """An IP address or a syntactically valid host name (RFC 1123); nothing is looked up."""
-    try:
-        ipaddress.ip_address(text)
-        return True
-    except ValueError:
-        pass
-    labels = text.removesuffix(".").split(".")
-    return 0 < len(text) <= 253 and all(_HOST_LABEL.match(label) for label in labels)
-
-
-def host_name(text: str) -> str:
-    """argparse type for --modbus-host."""
-    if not is_host(text):
-        raise argparse.ArgumentTypeError(f"not an IP address or host name: {text!r}")
-    return text
-
-
 def _seconds(value: Any) -> float | None:
     try:
         return parse_duration(value)
@@ -119,12 +96,3 @@ def _seconds(value: Any) -> float | None:
         return None
 
 
-def port_number(text: str) -> int:
-    """argparse type for --modbus-port: an integer 0..65535 (0 = any free port)."""
-    try:
-        port = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
-    if not 0 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"port {port} is outside 0..65535")
-    return port

@@ -26,7 +26,7 @@ from asyncua import Server, ua
 from asyncua.server.address_space import AttributeValue
 
 from softplc.core.commands import CommandRefused, Commands
-from softplc.clients.door_client import COMMANDS_OBJECT
+from softplc.protocols.opcua_names import COMMANDS_OBJECT
 from softplc.adapters.opcua.roles import role_of
 from softplc.core.tagdb import Origin
 

@@ -35,7 +35,7 @@ from softplc.adapters.opcua.condition_events import EventTypeId, attribute_value
 from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
-    from softplc.app.runtime import Runtime
+    from softplc.core.plant import Plant
 
 log = logging.getLogger(__name__)
 
@@ -68,9 +68,9 @@ class _Condition:
 class AlarmConditions:
     """The runtime's alarms as OPC UA conditions (see the module docstring)."""
 
-    def __init__(self, server: Server, runtime: Runtime, namespace_index: int) -> None:
+    def __init__(self, server: Server, plant: Plant, namespace_index: int) -> None:
         self.server = server
-        self.runtime = runtime
+        self.plant = plant
         self.ns = namespace_index
         self.by_node: dict[ua.NodeId, _Condition] = {}
         self.by_name: dict[str, _Condition] = {}
@@ -82,17 +82,17 @@ class AlarmConditions:
         self._unsubscribe: Any = None
 
     @classmethod
-    async def install(cls, server: Server, runtime: Runtime, namespace_index: int) -> AlarmConditions | None:
-        """Conditions for every alarm of the runtime (None when it has no alarms adapter)."""
-        if "alarms.list" not in runtime.commands:
+    async def install(cls, server: Server, plant: Plant, namespace_index: int) -> AlarmConditions | None:
+        """Conditions for every alarm of the plant (None when it has no alarms adapter)."""
+        if "alarms.list" not in plant.commands:
             return None
-        conditions = cls(server, runtime, namespace_index)
+        conditions = cls(server, plant, namespace_index)
         install_caller_context(server.iserver)
-        snapshots = [AlarmSnapshotView(item) for item in await runtime.commands.call("alarms.list", {}, INTERNAL)]
-        conditions.shelve_max = float((await runtime.commands.call("alarms.summary", {}, INTERNAL))["shelve_max"])
+        snapshots = [AlarmSnapshotView(item) for item in await plant.commands.call("alarms.list", {}, INTERNAL)]
+        conditions.shelve_max = float((await plant.commands.call("alarms.summary", {}, INTERNAL))["shelve_max"])
         conditions._build(snapshots)
         conditions._bind_methods()
-        conditions._unsubscribe = runtime.events.subscribe(conditions._on_event, kinds=("alarm",))
+        conditions._unsubscribe = plant.events.subscribe(conditions._on_event, kinds=("alarm",))
         conditions._task = asyncio.get_running_loop().create_task(conditions._drain(), name="opcua-conditions")
         return conditions
 
@@ -207,7 +207,7 @@ class AlarmConditions:
             return ua.StatusCode(ua.StatusCodes.BadNodeIdInvalid)
         if event_id is not None and bytes(event_id or b"") not in condition.event_ids:
             return ua.StatusCode(ua.StatusCodes.BadEventIdUnknown)
-        status, _, refusal = await call_command(self.runtime.commands, command, {"alarm": condition.name, **arguments}, origin)
+        status, _, refusal = await call_command(self.plant.commands, command, {"alarm": condition.name, **arguments}, origin)
         if status is not None:
             return status
         if refusal is not None:

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from softplc.app.runtime import Runtime
+    from softplc.core.plant import Plant
 
 DEFAULT_GUARD_SECONDS = 0.0015
 
@@ -30,17 +30,16 @@ class ScanGuard:
         self.waits = 0  # how often work was held back (diagnostics)
 
     @classmethod
-    def for_runtime(cls, runtime: Runtime, guard_seconds: float = DEFAULT_GUARD_SECONDS) -> ScanGuard:
-        """A guard for a runtime's tasks (inactive on a simulated clock, where time waits for us)."""
-        if runtime.clock.simulated or not runtime.engine.tasks:
+    def for_plant(cls, plant: Plant, guard_seconds: float = DEFAULT_GUARD_SECONDS) -> ScanGuard:
+        """A guard for a plant's tasks (inactive on a simulated clock, where time waits for us)."""
+        if plant.until_release() is None:
             return cls(None)
-        tasks, clock = runtime.engine.tasks, runtime.clock
 
         def until_release() -> float:
-            return min(task.next_release for task in tasks) - clock.now()
+            return plant.until_release() or 0.0
 
         # Leave the work most of each period even with a 1 ms task.
-        shortest = min(task.interval for task in tasks)
+        shortest = min(task.interval for task in plant.tasks)
         return cls(until_release, min(guard_seconds, 0.4 * shortest))
 
     async def clear(self) -> None:

@@ -33,7 +33,7 @@ from asyncua.common.callback import CallbackType
 from softplc import __version__
 from softplc.adapters.opcua.address_space import AddressSpaceBuilder, plan_folders, tag_node_id
 from softplc.adapters.opcua.browsing import MAX_CONTINUATION_POINTS
-from softplc.adapters.opcua.commands import CommandsDoor  # the door to runtime.commands
+from softplc.adapters.opcua.commands import CommandsDoor  # the door to plant.commands
 from softplc.adapters.opcua.conditions import AlarmConditions  # Part 9 conditions
 from softplc.adapters.opcua.history import MAX_NODES_PER_HISTORY_READ, HistoryProvider, NoHistory, TagHistoryService
 from softplc.adapters.opcua.history_capabilities import advertise_history
@@ -51,13 +51,13 @@ from softplc.adapters.opcua.writes import MAX_NODES_PER_READ, MAX_NODES_PER_WRIT
 from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
-    from softplc.app.runtime import Runtime
+    from softplc.core.plant import Plant
 
 log = logging.getLogger(__name__)
 
 
 class OpcUaServer:
-    """Adapter: an asyncua server whose address space mirrors the runtime's tag database."""
+    """Adapter: an asyncua server whose address space mirrors the plant's tag database."""
 
     name = "opcua"
 
@@ -89,21 +89,21 @@ class OpcUaServer:
 
     # -- lifecycle ------------------------------------------------------------------------
 
-    async def start(self, runtime: Runtime) -> None:
-        from softplc.app.runtime import AdapterError
+    async def start(self, plant: Plant) -> None:
+        from softplc.core.plant import AdapterError
 
         started = time.perf_counter()
         settings = self.settings
         try:
-            self.users = UserStore(settings.users_path(runtime.state_dir))
+            self.users = UserStore(settings.users_path(plant.state_dir))
         except ConfigError as error:
             raise AdapterError(f"OPC UA users file is invalid:\n{error}") from None
-        self.pki = Pki(settings.pki_path(runtime.state_dir))
+        self.pki = Pki(settings.pki_path(plant.state_dir))
         self._secured_channels = SecuredChannels()
-        self.guard = ScanGuard.for_runtime(runtime)
+        self.guard = ScanGuard.for_plant(plant)
         if self._given_history is None:
             # The historian (started before us, softplc/app/adapters.py) serves its reads as commands.
-            self.history = await CommandHistory.connect(runtime.commands) or NoHistory()
+            self.history = await CommandHistory.connect(plant.commands) or NoHistory()
         self.user_manager = SoftplcUserManager(self.users, settings.anonymous_role)
         server = GuardedServer(
             user_manager=self.user_manager,
@@ -117,7 +117,7 @@ class OpcUaServer:
             ),
         )
         self.server = server
-        server.name = f"softplc {runtime.config.name}"
+        server.name = f"softplc {plant.name}"
         server.product_uri = "urn:softplc"
         server.manufacturer_name = "softplc"
         server.application_type = ua.ApplicationType.Server
@@ -136,7 +136,7 @@ class OpcUaServer:
         collecting = gc.isenabled()
         gc.disable()
         try:
-            await self._build_server(server, runtime)
+            await self._build_server(server, plant)
         finally:
             if collecting:
                 gc.enable()
@@ -150,16 +150,16 @@ class OpcUaServer:
             self.server = None
             raise AdapterError(f"OPC UA cannot listen on {settings.host}:{settings.port}: {error.strerror or error}") from None
         self._after_listen(server)
-        self.server_clock = ServerStatusClock(server.iserver.aspace, runtime.clock)
+        self.server_clock = ServerStatusClock(server.iserver.aspace, plant.clock)
         await self.server_clock.install()
         self.server_clock.run()
         assert self.publisher is not None
         self.publisher.run()
         self.startup_seconds = time.perf_counter() - started
         log.info("OPC UA serving %d tags (%d nodes) on %s, ready in %.2f s",
-                 len(runtime.db), self.node_count, self.endpoint, self.startup_seconds)
+                 len(plant.tags), self.node_count, self.endpoint, self.startup_seconds)
 
-    async def _build_server(self, server: Server, runtime: Runtime) -> None:
+    async def _build_server(self, server: Server, plant: Plant) -> None:
         settings = self.settings
         await server.init()
         await server.set_application_uri(settings.application_uri)
@@ -174,10 +174,10 @@ class OpcUaServer:
         await advertise_history(server, getattr(self.history, "aggregates", ()), data=not isinstance(self.history, NoHistory))
         self.namespace_index = await server.register_namespace(settings.namespace)
         await self._configure_security(server)
-        await self._build_address_space(runtime)
+        await self._build_address_space(plant)
         # Alarms & Conditions (softplc/adapters/opcua/conditions.py), Objects/Commands (commands.py)
-        self.conditions = await AlarmConditions.install(server, runtime, self.namespace_index)
-        self.commands_door = await CommandsDoor.install(server, runtime.commands, self.namespace_index)
+        self.conditions = await AlarmConditions.install(server, plant, self.namespace_index)
+        self.commands_door = await CommandsDoor.install(server, plant.commands, self.namespace_index)
 
     async def stop(self) -> None:
         if self.conditions is not None:
@@ -195,7 +195,7 @@ class OpcUaServer:
             gc.unfreeze()
 
     def metrics(self) -> dict[str, Any]:
-        """Figures for /metrics (softplc/adapters/metrics/catalog.py): sessions, subscriptions, monitored items."""
+        """Figures for /metrics (named in manifest.py): sessions, subscriptions, monitored items."""
         if self.server is None:
             return {}
         iserver = self.server.iserver
@@ -243,10 +243,10 @@ class OpcUaServer:
             self.pki, self._secured_channels, all_secured=POLICY_NONE not in settings.policies
         )
 
-    async def _build_address_space(self, runtime: Runtime) -> None:
+    async def _build_address_space(self, plant: Plant) -> None:
         assert self.server is not None
         iserver = self.server.iserver
-        db = runtime.db
+        db = plant.tags
         ns = self.namespace_index
         node_ids = {tag.name: tag_node_id(tag.name, ns) for tag in db}
         self.publisher = Publisher(db, iserver.aspace, node_ids, guard=self.guard)
@@ -257,7 +257,7 @@ class OpcUaServer:
         self.node_count = builder.node_count
         self.writes = TagAttributeService(iserver.aspace, db, ns)
         iserver.attribute_service = self.writes
-        iserver.history_manager = TagHistoryService(iserver, db, ns, self.history, runtime.clock.run_blocking)
+        iserver.history_manager = TagHistoryService(iserver, db, ns, self.history, plant.clock.run_blocking)
         # UserAccessLevel per session role: asyncua's attribute service reads without the session.
         self.server.subscribe_server_callback(CallbackType.PostRead, self.writes.user_access_level)
 

@@ -16,12 +16,12 @@ from typing import TYPE_CHECKING, Any
 from urllib.parse import urlparse
 
 from softplc.core.roles import Role
+from softplc.protocols.opcua_names import DEFAULT_NAMESPACE
 
 if TYPE_CHECKING:
     from asyncua import ua
 
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/softplc/"
-DEFAULT_NAMESPACE = "urn:softplc:tags"
 DEFAULT_APPLICATION_URI = "urn:softplc:server"
 DEFAULT_FOLDER_SIZE = 100
 # Transport limits (asyncua's defaults are 100 MB messages of up to 1601 chunks, which an

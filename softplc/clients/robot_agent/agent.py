@@ -38,10 +38,10 @@ from softplc.robotics.peers import PEER_TAGS, PeerView
 from softplc.robotics.protocol import Answer, Registration, encode_report
 from softplc.robotics.robots import RobotFile, unknown_id_message
 from softplc.clients.login import REFUSALS
+from softplc.protocols.opcua_names import DEFAULT_NAMESPACE
 
 log = logging.getLogger(__name__)
 
-DEFAULT_NAMESPACE = "urn:softplc:tags"
 ANSWER_TIMEOUT = 10.0  # s the runtime has to answer a registration (it answers within a scan cycle)
 LOGIN_REFUSALS = frozenset(getattr(ua.StatusCodes, name) for name in REFUSALS)  # softplc/clients/login.py
 

@@ -57,6 +57,9 @@ class _Runtime(Protocol):
     tasks: Sequence[Task]
 
     @property
+    def scan_gate(self) -> ScanGate | None: ...
+
+    @property
     def stopping(self) -> bool: ...
 
     def programs_changed(self) -> None: ...
@@ -93,7 +96,7 @@ class OnlineChange:
         self._busy: Origin | None = None
         self._step = ""  # what the check is doing (read from the loop if it takes too long)
         # The check runs in a worker thread on the real clock: it steps aside around every release.
-        self._gate = ScanGate(runtime.engine, runtime.clock) if USE_SCAN_GATE and not runtime.clock.simulated else None
+        self._gate = runtime.scan_gate if USE_SCAN_GATE else None  # the runtime's one gate (None on a simulated clock)
         runtime.commands.register(
             "programs.apply", self._command, permission=Permission.ENGINEER, description="apply online changes",
             arguments={"check": "true: check the file and show the differences, apply nothing"},

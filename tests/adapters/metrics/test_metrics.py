@@ -27,11 +27,11 @@ from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.adapters.metrics.adapter import MetricsAdapter
 from softplc.adapters.metrics.histograms import SeriesHistogram
-from softplc.adapters.metrics.settings import MetricsSettings
+from softplc.adapters.hmi.metrics_settings import MetricsSettings
 from softplc.app.runtime import Runtime
-from softplc.engine.stats import TimingSeries
+from softplc.core.stats import TimingSeries
 
-REPO = Path(__file__).resolve().parent.parent
+from conftest import REPO  # noqa: E402
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 
 
@@ -188,7 +188,8 @@ async def test_a_histogram_bins_only_new_samples_and_scales_a_window_overrun() -
 async def test_who_may_scrape_a_token_a_login_or_nobody_else(tmp_path: Path) -> None:
     plant = await start_plant(tmp_path, start=False)
     settings = MetricsSettings(anonymous_loopback=False, token_file=Path("metrics.token"))
-    plant.runtime.adapters.insert(0, MetricsAdapter(plant.hmi, settings))
+    plant.hmi.metrics_route.settings = settings  # who may scrape is the HMI's (servers.hmi.metrics)
+    plant.runtime.adapters.insert(0, MetricsAdapter())
     await plant.runtime.start()
     try:
         token_file = tmp_path / "state" / "metrics.token"
@@ -225,7 +226,7 @@ async def test_anonymous_scrapes_from_loopback_by_default_and_a_broken_adapter_i
             raise RuntimeError("a bug in an adapter")
 
     plant = await start_plant(tmp_path, start=False)
-    plant.runtime.adapters.insert(0, MetricsAdapter(plant.hmi))
+    plant.runtime.adapters.insert(0, MetricsAdapter())
     plant.runtime.add_adapter(Broken())
     await plant.runtime.start()
     try:

@@ -20,7 +20,7 @@ import pytest
 
 from hmi_support import start_plant
 from softplc.adapters.metrics.adapter import MetricsAdapter
-from softplc.adapters.metrics.settings import MetricsSettings
+from softplc.adapters.hmi.metrics_settings import MetricsSettings
 
 PROMETHEUS = shutil.which("prometheus") or "/usr/bin/prometheus"
 if not os.path.exists(PROMETHEUS):
@@ -56,7 +56,8 @@ async def ask(http: aiohttp.ClientSession, url: str, **params: str) -> Any:
 async def test_a_prometheus_server_scrapes_the_plant(tmp_path: Path) -> None:
     plant = await start_plant(tmp_path / "plant", start=False)
     settings = MetricsSettings(anonymous_loopback=False, token_file=Path("metrics.token"))
-    plant.runtime.adapters.insert(0, MetricsAdapter(plant.hmi, settings))
+    plant.hmi.metrics_route.settings = settings  # who may scrape is the HMI's (servers.hmi.metrics)
+    plant.runtime.adapters.insert(0, MetricsAdapter())
     await plant.runtime.start()
     port = free_port()
     config = tmp_path / "prometheus.yml"

@@ -5,7 +5,7 @@ import random
 import numpy as np
 import pytest
 
-from softplc.engine.stats import TimingSeries
+from softplc.core.stats import TimingSeries
 
 
 @pytest.mark.parametrize("count", [1, 2, 3, 10, 101, 9_999, 10_000, 12_345])
