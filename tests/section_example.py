@@ -50,6 +50,13 @@ def tags(config: PlantConfig) -> list[TagDef]:
     return [TagDef("_sys.notebook.rows", DataType.UINT32, 0, description="rows recorded", access=Access.RO, runtime_only=True)]
 
 
+def alarms(config: PlantConfig) -> list[tuple[tuple[str | int, ...], dict[str, Any]]]:
+    """An alarm the owner adds, like a link's 'down' alarm: on its own tag, located at its section."""
+    if config.section("notebook") is None:
+        return []
+    return [(("notebook",), {"name": "notebook_full", "limit": {"tag": "_sys.notebook.rows", "hi": 1000}, "priority": "low"})]
+
+
 SECTION = Section(
     path=("notebook",),
     schema=SCHEMA,
@@ -58,4 +65,5 @@ SECTION = Section(
     program_keys={"record": {"type": "boolean"}},
     problems=problems,
     tags=tags,
+    alarms=alarms,
 )

@@ -179,6 +179,10 @@ class Section:
     # Tags the owner adds to the runtime, like the system tags (e.g. alarm summary tags under
     # `_sys.`): served over every protocol, listed by `softplc tags`, usable in --until.
     tags: Callable[[PlantConfig], list[TagDef]] | None = None
+    # Alarms the owner adds (e.g. "link plc2 is down" on its `_sys.links.` tag), each as (the
+    # path in the file it stems from, its definition in the `alarms:` syntax): the alarms adapter
+    # evaluates them beside the user's, and a problem with one (a name taken twice) points there.
+    alarms: Callable[[PlantConfig], list[tuple[tuple[str | int, ...], dict[str, Any]]]] | None = None
 
 
 class RegistryError(RuntimeError):

@@ -73,3 +73,12 @@ def config_schema() -> dict[str, Any]:
 def editor_schema() -> dict[str, Any]:
     """The schema `softplc schema` prints: config_schema() with durations checked for their form too."""
     return strict_durations(config_schema())
+
+
+def contributed_alarms(config: PlantConfig, sections: tuple[Section, ...] | None = None) -> list[tuple[tuple[str | int, ...], dict[str, Any]]]:
+    """The alarms the owners add to this (valid) configuration, each with where it stems from, in registry order."""
+    alarms: list[tuple[tuple[str | int, ...], dict[str, Any]]] = []
+    for section in registered() if sections is None else sections:
+        if section.alarms is not None:
+            alarms.extend(section.alarms(config))
+    return alarms

@@ -176,3 +176,24 @@ def test_an_owner_adds_tags_to_the_runtime_like_the_system_tags(with_notebook, t
     assert "_sys.notebook.rows" in {mapping.name for table in Table for mapping in served.in_table(table)}
     assert main(["tags", str(path), "--format", "json"]) == 0
     assert "_sys.notebook.rows" in {row["name"] for row in json.loads(capsys.readouterr().out)}
+
+
+def test_an_owner_adds_alarms_that_sit_beside_the_users(with_notebook, tmp_path: Path) -> None:
+    from softplc.adapters.alarms.settings import AlarmSettings, configured
+
+    config = load_config(write(tmp_path, "version: 1\nnotebook: {}\ntags:\n  a: {type: float32}\n"))
+    assert configured(config)  # no alarms: section, yet the plant has an alarm
+    assert [d.name for d in AlarmSettings.from_config(config).definitions] == ["notebook_full"]
+    clash = write(tmp_path, """\
+        version: 1
+        notebook: {}
+        tags:
+          a: {type: float32}
+        alarms:
+          definitions:
+            - {name: notebook_full, limit: {tag: a, hi: 5}}
+        """)
+    with pytest.raises(ConfigError) as caught:
+        load_config(clash)
+    [problem] = caught.value.problems
+    assert str(problem).startswith(f"{clash}:2:") and "duplicate alarm name 'notebook_full'" in str(problem)

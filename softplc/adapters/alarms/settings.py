@@ -111,8 +111,10 @@ class AlarmSettings:
 
 
 def configured(config: PlantConfig) -> bool:
-    """Whether the configuration has an `alarms:` section."""
-    return isinstance(config.raw, dict) and config.raw.get(SECTION) is not None
+    """Whether the plant has alarms: an `alarms:` section, or alarms another section adds (softplc.config.schema.Section.alarms)."""
+    from softplc.config.sections import contributed_alarms
+
+    return (isinstance(config.raw, dict) and config.raw.get(SECTION) is not None) or bool(contributed_alarms(config))
 
 
 def alarm_problems(config: PlantConfig) -> list[Problem]:
@@ -123,8 +125,8 @@ def alarm_problems(config: PlantConfig) -> list[Problem]:
 
 
 def known_tags(config: PlantConfig) -> dict[str, TagDef]:
-    """Tags an alarm may read: the plant's and the runtime's `_sys.` diagnostics."""
-    return {d.name: d for d in (*config.tags, *system_tag_definitions(config.tasks))}
+    """Tags an alarm may read: the plant's, the runtime's `_sys.` diagnostics and those the sections add."""
+    return {d.name: d for d in (*config.tags, *system_tag_definitions(config.tasks), *config.contributed_tags)}
 
 
 class _Checker:
@@ -157,7 +159,7 @@ class _Checker:
     def check(self) -> AlarmSettings:
         section = self.config.raw.get(SECTION) if isinstance(self.config.raw, dict) else None
         if not isinstance(section, dict):
-            return AlarmSettings()
+            return AlarmSettings(tuple(self._contributed()))
         shelve_max = DEFAULT_SHELVE_MAX
         if "shelve_max" in section:
             shelve_max = self.duration(section["shelve_max"], (SECTION, "shelve_max"), "shelve_max", positive=True) or DEFAULT_SHELVE_MAX
@@ -179,7 +181,13 @@ class _Checker:
             if isinstance(spec, dict) and isinstance(spec.get("name"), str):
                 definitions.extend(self.declaration(spec, (SECTION, "definitions", index)))
         storage = {key: value for key, value in journal.items() if key != "retention"}
-        return AlarmSettings(tuple(definitions), shelve_max, storage, retention)
+        return AlarmSettings((*definitions, *self._contributed()), shelve_max, storage, retention)
+
+    def _contributed(self) -> list[AlarmDefinition]:
+        """The alarms other sections add, after the user's (a name the user took first is the section's problem)."""
+        from softplc.config.sections import contributed_alarms
+
+        return [definition for path, spec in contributed_alarms(self.config) for definition in self.declaration(spec, path)]
 
     def declaration(self, spec: dict[str, Any], path: tuple[Any, ...]) -> list[AlarmDefinition]:
         for_each = spec.get("for_each")
