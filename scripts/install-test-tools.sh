@@ -12,6 +12,8 @@ compgen -G "/usr/lib/postgresql/*/bin/initdb" >/dev/null || apt_packages+=(postg
 command -v chromium >/dev/null 2>&1 || apt_packages+=(chromium)
 # tests/adapters/metrics/test_metrics_prometheus.py has a real Prometheus server scrape the HMI's /metrics.
 [ -x /usr/bin/prometheus ] || apt_packages+=(prometheus)
+# The MQTT users (VDA 5050, Sparkplug B) are tested against a real broker (tests/mosquitto_server.py).
+[ -x /usr/sbin/mosquitto ] || apt_packages+=(mosquitto)
 if [ ${#apt_packages[@]} -gt 0 ]; then
   echo "installing system packages: ${apt_packages[*]}" >&2
   scripts/apt-install.sh "${apt_packages[@]}" \

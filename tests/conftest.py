@@ -82,3 +82,30 @@ def storage_settings(request, tmp_path: Path):
     if request.param == "sqlite":
         return StorageSettings.sqlite(tmp_path / "store.sqlite", flush_period=0.05)
     return StorageSettings.postgresql(request.getfixturevalue("postgres_dsn"), flush_period=0.05)
+
+
+# -- MQTT: a real mosquitto broker ------------------------------------------------------------------
+
+
+@pytest.fixture
+def mosquitto():
+    """A mosquitto broker on a free loopback port for one test (stop() and start() it to restart it).
+
+    Skipped when mosquitto is missing, except under CI (CI=true), where scripts/install-test-tools.sh
+    must have installed it: there it fails.
+    """
+    import os
+
+    from tests.mosquitto_server import MosquittoServer, MosquittoUnavailable
+
+    try:
+        server = MosquittoServer()
+    except MosquittoUnavailable as error:
+        if os.environ.get("CI"):
+            raise
+        pytest.skip(str(error))
+    server.start()
+    try:
+        yield server
+    finally:
+        server.stop()
