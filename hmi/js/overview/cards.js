@@ -24,7 +24,7 @@ export class TaskCards {
     this.fleet = fleet;
     this.live = live;
     this.cards = fleet.tasks.map((task, index) => this._card(task, index, onOpen));
-    this.node = el('div', { class: 'task-cards side-stack' }, ...this.cards.map((card) => card.node));
+    this.node = el('div', { class: 'task-cards side-stack live-content' }, ...this.cards.map((card) => card.node));
   }
 
   names() {
@@ -124,7 +124,7 @@ export class RobotList {
       node.addEventListener('keydown', (event) => { if (event.key === 'Enter') onOpen(robot); });
       return { robot, node, state, line2, mark };
     });
-    this.node = el('div', { class: 'robot-list' }, ...this.rows.map((row) => row.node));
+    this.node = el('div', { class: 'robot-list live-content' }, ...this.rows.map((row) => row.node));
   }
 
   names() {

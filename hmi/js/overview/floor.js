@@ -47,7 +47,7 @@ export class Floor {
   _draw() {
     const width = this.bounds.w * SCALE;
     const height = this.bounds.h * SCALE;
-    const root = svg('svg', { class: 'floor', viewBox: `0 0 ${width.toFixed(1)} ${height.toFixed(1)}`, role: 'img',
+    const root = svg('svg', { class: 'floor live-content', viewBox: `0 0 ${width.toFixed(1)} ${height.toFixed(1)}`, role: 'img',
       'aria-label': `Factory floor, ${formatNumber(this.bounds.w)} m by ${formatNumber(this.bounds.h)} m, with stations and robots` });
     if (this.fleet.map) {
       root.append(svg('image', { href: this.fleet.map.url, x: 0, y: 0, width, height, preserveAspectRatio: 'none' }));
