@@ -57,11 +57,16 @@ function renderUser() {
   const session = state.session;
   if (session.user) {
     box.append(
-      el('span', { class: 'who', 'data-role': session.role, text: `${session.user} · ${session.role}` }),
+      // On a phone a long name is shortened, never the role.
+      el('span', { class: 'who', 'data-role': session.role, title: `${session.user} · ${session.role}` },
+        el('span', { class: 'user-name', text: session.user }), '\u00a0·\u00a0', el('span', { class: 'role', text: session.role })),
       el('button', { type: 'button', text: 'Log out', onclick: logout }),
     );
   } else {
-    if (session.role) box.append(el('span', { class: 'who', 'data-role': session.role, text: `visitor · ${session.role}` }));
+    if (session.role) {
+      box.append(el('span', { class: 'who', 'data-role': session.role },
+        el('span', { class: 'user-name', text: 'visitor' }), '\u00a0·\u00a0', el('span', { class: 'role', text: session.role })));
+    }
     box.append(el('button', { type: 'button', text: 'Log in', onclick: login }));
   }
 }
