@@ -164,8 +164,13 @@ class HistoryRecorder:
         rows: list[Row] = []
         for tag_filter in self.filters.values():
             rows += tag_filter.release()
-        writer.put(SINK_NAME, rows)
+        # The end of recording: a BAD sample without a value for every tag (as PI's shutdown
+        # events), so a reader knows nothing was recorded until the next run — a trend draws a
+        # gap over the outage, not a line across it.
         assert self._runtime is not None
+        end = max([self._runtime.clock.wall(), *(row[1] for row in rows)])
+        rows += [(name, end, math.nan, Quality.BAD) for name in self.filters]
+        writer.put(SINK_NAME, rows)
         await self._runtime.clock.run_blocking(writer.stop)
         self.writer = None
 
