@@ -18,7 +18,7 @@ import pytest
 import pytest_asyncio
 
 from hmi_support import Plant, browser, chromium_available, open_page, ready, screenshot_on_failure, wait_until  # noqa: F401 (browser: a fixture)
-from hmi_supervisory_support import start_supervisory_plant
+from hmi_supervisory_support import PLANT, start_supervisory_plant
 from softplc.clock import SimClock
 from softplc.tags import Quality
 
@@ -46,9 +46,15 @@ PAINTED = """([pen, time, value, reach]) => {
 }"""
 
 
+RECORDED = '    - tags: ["t*_iBL", "t*_iBM", limit, flag, speed]\n'
+assert RECORDED in PLANT
+# `speed` recorded with swinging-door compression: its archive is a straight-line approximation.
+COMPRESSED = PLANT.replace(RECORDED, '    - tags: ["t*_iBL", "t*_iBM", limit, flag]\n    - {tags: speed, compression: {deviation: 0.05}}\n')
+
+
 @pytest_asyncio.fixture(loop_scope="module", scope="module")
 async def plant(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Plant]:
-    plant = await start_supervisory_plant(tmp_path_factory.mktemp("hmi-trends"), clock=SimClock(speed=SPEED), modbus=False)
+    plant = await start_supervisory_plant(tmp_path_factory.mktemp("hmi-trends"), clock=SimClock(speed=SPEED), modbus=False, text=COMPRESSED)
     yield plant
     await plant.stop()
 
@@ -80,7 +86,7 @@ async def test_a_constant_value_is_held_to_now_and_a_setpoint_steps(browser: Any
             await chart_ready(page)
             now = clock.wall()
             middle = (first + second) / 2
-            # A setpoint (a float clients write) and an integer hold their value until the next: a step, not a ramp.
+            # A setpoint (a float recorded on every change) and an integer hold their value until the next: a step, not a ramp.
             assert await page.evaluate(PAINTED, [0, middle, low, 1]), f"{tag}: {low} is not held until the next value"
             assert not await page.evaluate(PAINTED, [0, middle, middle_value, 2]), f"{tag} is drawn as a ramp"
             # The last value is held to now, not a dot at its last sample.
@@ -88,6 +94,25 @@ async def test_a_constant_value_is_held_to_now_and_a_setpoint_steps(browser: Any
             assert await page.evaluate(PAINTED, [0, now - 3 * SPEED, high, 1]), f"{tag} does not reach now"
             assert not errors, errors
         await context.close()
+
+
+async def test_a_compressed_value_is_drawn_sloped(browser: Any, plant: Plant) -> None:
+    clock = plant.runtime.clock
+    begin = math.floor(clock.now()) + 1.05
+    for step, value in enumerate([*range(0, 11), 9, 8]):  # up a ramp, a simulated second a step, then down: the turn closes the door at 10
+        await clock.sleep_until(begin + step)
+        plant.drive(speed=float(value))
+    await wait_until(lambda: recorded(plant, "speed", 10.0), message="the ramp's top archived")
+    archived = {sample.value: sample.time for sample in plant.adapters["history"]._reader.raw("speed", 0, 2e10).samples}
+    assert 5.0 not in archived, archived  # the middle of the ramp is not stored: the drawing must slope through it
+    middle = (archived[1.0] + archived[10.0]) / 2  # 0 is the starting value, stored when the run began
+    context, page, errors = await open_page(browser, plant.url + "#/trends?tags=speed&range=10m")
+    async with screenshot_on_failure(page, "trend-compressed-sloped"):
+        await chart_ready(page)
+        assert await page.evaluate(PAINTED, [0, middle, 5.5, 2]), "the ramp is not drawn as a slope"
+        assert not await page.evaluate(PAINTED, [0, middle, 1.0, 2])
+        assert not errors, errors
+    await context.close()
 
 
 async def test_the_first_pen_is_the_plants_levels_and_times_are_24_hour_and_apart(browser: Any, plant: Plant) -> None:

@@ -6,7 +6,6 @@
 
 import { el, clear } from './dom.js';
 import { callWithTime } from './commands.js';
-import { tagMeta } from './api.js';
 import { noteRuntimeTime, runtimeNow } from './runtime_clock.js';
 import { timeLabels, fullTime } from './trend_time.js';
 
@@ -34,21 +33,22 @@ export function loadUplot() {
 let historizedCache = null;
 
 /**
- * Whether a pen is drawn as steps (each value held until the next) or sloped (straight lines):
- * steps for what the historian records as stepped (integers, booleans) and for setpoints —
- * floats clients may write (access rw), which change when someone sets them, never gradually.
+ * Whether a pen is drawn as steps (each value held until the next) or sloped (straight lines), by
+ * how it is recorded: a tag recorded on every change (or past a deadband) kept its stored value
+ * until the next one was stored — a setpoint, an integer, a level that jumps when a robot unloads
+ * — so it is drawn as steps; only a compressed tag's archive is a straight-line approximation of
+ * its curve (swinging door), drawn sloped.
  */
-export function drawnStepped(info, meta) {
-  return info.interpolation === 'stepped' || Boolean(meta && meta.access === 'rw');
+export function drawnStepped(info) {
+  return info.interpolation === 'stepped' || !info.compressed;
 }
 
-/** The tags with history: Map name → {tag, type, unit, interpolation, stepped}. */
+/** The tags with history: Map name → {tag, type, unit, interpolation, compressed, stepped}. */
 export async function historized() {
   if (!historizedCache) {
-    historizedCache = callWithTime('history.tags').then(async (answer) => {
+    historizedCache = callWithTime('history.tags').then((answer) => {
       noteRuntimeTime(answer.time);
-      const metas = new Map((await tagMeta(answer.result.map((info) => info.tag))).map((meta) => [meta.name, meta]));
-      return new Map(answer.result.map((info) => [info.tag, { ...info, stepped: drawnStepped(info, metas.get(info.tag)) }]));
+      return new Map(answer.result.map((info) => [info.tag, { ...info, stepped: drawnStepped(info) }]));
     });
     historizedCache.catch(() => { historizedCache = null; });
   }

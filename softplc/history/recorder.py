@@ -139,7 +139,8 @@ class HistoryRecorder:
         self.writer = writer
         # Reads for other adapters (OPC UA HistoryRead, trends) go through runtime.commands.
         self._reader = HistoryReader(database, self.plant)
-        self._unregister = register_history_commands(runtime, self._reader, {info.name: info for info in infos if info.name in runtime.db})
+        self._unregister = register_history_commands(runtime, self._reader, {info.name: info for info in infos if info.name in runtime.db},
+                                                     {name for name, policy in self.policies.items() if policy.compression})
         db = runtime.db
         self.filters = {name: TagFilter(name, policy, self.types[name][0] != "string" and not self.types[name][0] == "bool")
                         for name, policy in self.policies.items() if name in db}
