@@ -264,7 +264,7 @@ export class TrendChart {
     const compact = this.options.compact;
     const scales = { x: { time: true } };
     // 24-hour times like every other page; ticks at least 80 px apart, so no label touches the next.
-    const axes = [{ scale: 'x', stroke: '#5b6776', grid: { stroke: '#e6eaf0' }, ticks: { stroke: '#d5dbe3' }, size: compact ? 40 : 48,
+    const axes = [{ scale: 'x', stroke: '#5b6776', grid: { stroke: '#e6eaf0' }, ticks: { stroke: '#d5dbe3' }, size: 50,
       space: 80, values: timeLabels }];
     units.forEach((unit, i) => {
       scales[unit] = unit === 'on/off' ? { range: [-0.1, 1.1] } : { auto: true };
