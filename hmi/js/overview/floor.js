@@ -204,9 +204,12 @@ export class Floor {
     for (const { source, target } of this.stations) for (const station of [source, target]) if (station) obstacles.push(...station.obstacles());
     for (const marker of markers) if (marker.goalBox) obstacles.push(marker.goalBox);
     const robots = markers.map((marker) => {
-      let nameWidth = 0;
-      try { nameWidth = marker.label.getComputedTextLength(); } catch { nameWidth = 0; }
-      if (!(nameWidth > 0)) nameWidth = 8.2 * marker.robot.id.length;
+      if (!marker.nameWidth) {  // measured once it is laid out (a robot's name does not change)
+        let measured = 0;
+        try { measured = marker.label.getComputedTextLength(); } catch { measured = 0; }
+        if (measured > 0) marker.nameWidth = measured;
+      }
+      const nameWidth = marker.nameWidth || 8.2 * marker.robot.id.length;
       marker.badge.setAttribute('transform', `translate(${(nameWidth + 4).toFixed(1)} 0)`);
       const afterBadge = nameWidth + (marker.hasTask ? 34 : 0);
       marker.forced.setAttribute('transform', `translate(${(afterBadge + 4).toFixed(1)} 0)`);
