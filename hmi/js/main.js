@@ -10,7 +10,7 @@ import { get, post, setCsrf, forgetMeta } from './api.js';
 import { Live } from './live.js';
 import { openWrite, openLogin, openDetails } from './dialogs.js';
 
-const state = { session: null, live: null, unmount: null, pageId: null, banners: [], failed: false };
+const state = { session: null, live: null, unmount: null, pageId: null, banners: [], failed: false, booted: false, showConnection: () => {} };
 
 function context(params) {
   return {
@@ -57,11 +57,16 @@ function renderUser() {
   const session = state.session;
   if (session.user) {
     box.append(
-      el('span', { class: 'who', 'data-role': session.role, text: `${session.user} · ${session.role}` }),
+      // On a phone a long name is shortened, never the role.
+      el('span', { class: 'who', 'data-role': session.role, title: `${session.user} · ${session.role}` },
+        el('span', { class: 'user-name', text: session.user }), '\u00a0·\u00a0', el('span', { class: 'role', text: session.role })),
       el('button', { type: 'button', text: 'Log out', onclick: logout }),
     );
   } else {
-    if (session.role) box.append(el('span', { class: 'who', 'data-role': session.role, text: `visitor · ${session.role}` }));
+    if (session.role) {
+      box.append(el('span', { class: 'who', 'data-role': session.role },
+        el('span', { class: 'user-name', text: 'visitor' }), '\u00a0·\u00a0', el('span', { class: 'role', text: session.role })));
+    }
     box.append(el('button', { type: 'button', text: 'Log in', onclick: login }));
   }
 }
@@ -80,7 +85,7 @@ async function restart() {
   forgetMeta();
   await start();
   state.failed = false;
-  state.live.reconnect();
+  if (!state.session.login_required) state.live.reconnect();
 }
 
 function route() {
@@ -113,6 +118,10 @@ async function show(page, params) {
 }
 
 function showLoginPage() {
+  // No live channel before the login (the runtime refuses it): that is no outage, so say neither
+  // "disconnected" nor a runtime state this visitor may not see.
+  state.live.stop();
+  showNotLive();
   const root = clear(document.getElementById('page'));
   clear(document.getElementById('nav'));
   root.append(el('div', { class: 'panel login-page' },
@@ -139,15 +148,45 @@ async function loadBanners() {
   }
 }
 
+function showNotLive() {
+  document.body.classList.remove('offline');
+  document.getElementById('offline').hidden = true;
+  const connection = document.getElementById('connection');
+  connection.className = 'chip conn idle';
+  setText(connection, 'not live');
+  connection.title = 'Live values begin once you log in';
+  document.getElementById('runtime-state').hidden = true;
+}
+
+/** The header's runtime state: "unreachable" (greyed) while no fresh value of it can come. */
+function showRuntimeState(chip) {
+  chip.hidden = false;
+  if (document.body.classList.contains('offline')) {
+    chip.className = 'chip idle';
+    setText(chip, 'unreachable');
+    chip.title = 'The runtime cannot be reached: its state is unknown';
+    return;
+  }
+  const item = state.live.get('_sys.state');
+  const error = state.live.get('_sys.error');
+  const value = item ? String(item.v) : '…';
+  chip.className = `chip ${value === 'RUNNING' ? 'ok' : value === 'ERROR' ? 'bad' : 'warn'}`;
+  setText(chip, value);
+  chip.title = error && error.v ? `Runtime error: ${error.v}` : 'Runtime state';
+}
+
 function watchHeader() {
   const chip = document.getElementById('runtime-state');
   const offline = document.getElementById('offline');
   const connection = document.getElementById('connection');
   let countdown = null;
-  state.live.addEventListener('state', (event) => {
-    const { state: now, reason, retryIn } = event.detail;
-    document.body.classList.toggle('offline', now === 'disconnected');
+  let last = null;  // the live channel's latest state event
+  // Shown once the session is known: a socket refused before it (a login page) is no outage.
+  state.showConnection = () => {
+    if (!last || !state.booted || (state.session && state.session.login_required)) return;
+    const { state: now, reason, retryIn } = last;
     clearInterval(countdown);
+    connection.title = '';
     if (now === 'live') {
       connection.className = 'chip conn ok';
       setText(connection, 'live');
@@ -156,6 +195,10 @@ function watchHeader() {
       connection.className = 'chip conn warn';
       setText(connection, 'connecting…');
     } else {
+      // Every value shown is stale from now until a fresh snapshot arrives (the 'synced' event
+      // below), through all the reconnection attempts: the page greys them (body.offline).
+      document.body.classList.add('offline');
+      showRuntimeState(chip);
       connection.className = 'chip conn bad';
       setText(connection, 'disconnected');
       offline.hidden = false;
@@ -164,19 +207,17 @@ function watchHeader() {
       say();
       countdown = setInterval(() => { left -= 1; say(); if (left <= 0) clearInterval(countdown); }, 1000);
     }
+  };
+  state.live.addEventListener('state', (event) => { last = event.detail; state.showConnection(); });
+  state.live.addEventListener('synced', () => {
+    document.body.classList.remove('offline');
+    showRuntimeState(chip);
   });
   state.live.addEventListener('hello', async (event) => {
     // A new runtime (new sessions, maybe new tags), or the first page load found it down.
     if (event.detail.restarted || state.failed) await restart();
   });
-  state.live.watch(['_sys.state', '_sys.error'], () => {
-    const item = state.live.get('_sys.state');
-    const error = state.live.get('_sys.error');
-    const value = item ? String(item.v) : '…';
-    chip.className = `chip ${value === 'RUNNING' ? 'ok' : value === 'ERROR' ? 'bad' : 'warn'}`;
-    setText(chip, value);
-    chip.title = error && error.v ? `Runtime error: ${error.v}` : 'Runtime state';
-  });
+  state.live.watch(['_sys.state', '_sys.error'], () => showRuntimeState(chip));
 }
 
 async function start() {
@@ -203,6 +244,8 @@ async function boot() {
     const root = clear(document.getElementById('page'));
     root.append(el('div', { class: 'error-banner', role: 'alert', text: `The runtime cannot be reached: ${error.message}. It reconnects by itself.` }));
   }
+  state.booted = true;
+  state.showConnection();
   window.softplcHmi = state;  // for debugging and tests: the live channel and session
 }
 

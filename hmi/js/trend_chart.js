@@ -7,6 +7,7 @@
 import { el, clear } from './dom.js';
 import { callWithTime } from './commands.js';
 import { noteRuntimeTime, runtimeNow } from './runtime_clock.js';
+import { timeLabels, fullTime } from './trend_time.js';
 
 const UPLOT = '/vendor/uplot/dist/uPlot.esm.js';
 const UPLOT_CSS = '/vendor/uplot/dist/uPlot.min.css';
@@ -31,17 +32,30 @@ export function loadUplot() {
 
 let historizedCache = null;
 
-/** The tags with history: Map name → {tag, type, unit, interpolation}. */
+/**
+ * Whether a pen is drawn as steps (each value held until the next) or sloped (straight lines), by
+ * how it is recorded: a tag recorded on every change (or past a deadband) kept its stored value
+ * until the next one was stored — a setpoint, an integer, a level that jumps when a robot unloads
+ * — so it is drawn as steps; only a compressed tag's archive is a straight-line approximation of
+ * its curve (swinging door), drawn sloped.
+ */
+export function drawnStepped(info) {
+  return info.interpolation === 'stepped' || !info.compressed;
+}
+
+/** The tags with history: Map name → {tag, type, unit, interpolation, compressed, stepped}. */
 export async function historized() {
   if (!historizedCache) {
     historizedCache = callWithTime('history.tags').then((answer) => {
       noteRuntimeTime(answer.time);
-      return new Map(answer.result.map((info) => [info.tag, info]));
+      return new Map(answer.result.map((info) => [info.tag, { ...info, stepped: drawnStepped(info) }]));
     });
     historizedCache.catch(() => { historizedCache = null; });
   }
   return historizedCache;
 }
+
+const HOLD_END = 1e-3;  // s: a value held up to where the data stop ends this much before the gap
 
 /** A value as a number to plot, or null (a gap) for bad quality and what cannot be plotted. */
 function plotValue(value, quality) {
@@ -61,13 +75,23 @@ export class TrendChart {
     this.end = 0;
     this.follow = false;
     this.plot = null;
-    this.xs = [];
+    this.samples = [];  // per pen: the recorded values [[time, value or null (no data)], ...] in time order
+    this.before = [];   // per pen: the last value at or before the window's start, or null
+    this.xs = [];       // what is drawn (uPlot's aligned data, built from the above by _compose)
     this.ys = [];
     this.onUserRange = null;
     this.problems = [];
     this._request = 0;
     this._watch = null;
     this._tick = null;
+    this._lostAt = null;  // runtime time the live channel was lost: values held no further
+    this._onState = (event) => {
+      if (event.detail.state === 'disconnected' && this._lostAt === null) this._lostAt = runtimeNow(this.ctx.session);
+    };
+    this._onSynced = () => { this._lostAt = null; this._slide(); };
+    ctx.live.addEventListener('state', this._onState);
+    ctx.live.addEventListener('synced', this._onSynced);
+    if (ctx.live.state === 'disconnected') this._lostAt = runtimeNow(ctx.session);
     this._resize = new ResizeObserver(() => this._fit());
     this._resize.observe(host);
     host.addEventListener('wheel', (event) => this._wheel(event), { passive: false });
@@ -91,6 +115,8 @@ export class TrendChart {
 
   destroy() {
     this._request += 1;
+    this.ctx.live.removeEventListener('state', this._onState);
+    this.ctx.live.removeEventListener('synced', this._onSynced);
     this._resize.disconnect();
     clearInterval(this._tick);
     if (this._watch) this._watch.close();
@@ -104,50 +130,84 @@ export class TrendChart {
     const mine = ++this._request;
     const width = Math.max(200, this.host.clientWidth || 600);
     const points = Math.min(4000, Math.max(200, Math.round(width * 1.5)));
-    const answers = await Promise.all(this.pens.map((pen) => callWithTime('history.plot', { tag: pen.tag, start, end, max_points: points })
-      .then((answer) => ({ answer }), (error) => ({ error }))));
+    // Per pen: its values in the window, and the last one before it (held, or sloping, into the window).
+    const answers = await Promise.all(this.pens.map((pen) => Promise.all([
+      callWithTime('history.plot', { tag: pen.tag, start, end, max_points: points }),
+      callWithTime('history.read_raw', { tag: pen.tag, start, end: 0, limit: 1 }),  // start > end: backwards from start
+    ]).then(([plot, before]) => ({ plot, before }), (error) => ({ error }))));
     if (mine !== this._request) return;
     this.problems = [];
-    const series = answers.map(({ answer, error }, index) => {
+    this.samples = [];
+    this.before = [];
+    answers.forEach(({ plot, before, error }, index) => {
       if (error) {
         this.problems.push(`${this.pens[index].tag}: ${error.message}`);
-        return [];
+        this.samples.push([]);
+        this.before.push(null);
+        return;
       }
-      noteRuntimeTime(answer.time);
-      return answer.result.samples.map((sample) => [sample.time, plotValue(sample.value, sample.quality)]);
+      noteRuntimeTime(plot.time);
+      this.samples.push(plot.result.samples.map((sample) => [sample.time, plotValue(sample.value, sample.quality)]));
+      const edge = before.result.samples[0];
+      this.before.push(edge ? [edge.time, plotValue(edge.value, edge.quality)] : null);
     });
-    this._merge(series);
     this.start = start;
     this.end = end;
+    this._compose();
     if (rebuild || !this.plot) this._build();
     else this._redraw();
     this._followLive();
-    this.host.dataset.points = String(this.xs.length);
   }
 
-  /** One x array for every pen (uPlot's aligned data): undefined where a pen has no sample (bridged), null for its gaps. */
-  _merge(series) {
+  /** Until when the values shown hold: now on the runtime clock (or when the live channel was lost), at most the window's end. */
+  _edge() {
+    const now = this._lostAt ?? runtimeNow(this.ctx.session);
+    return Math.min(this.end, now);
+  }
+
+  /**
+   * What uPlot draws, from the recorded values: each pen from its value before the window; a
+   * value held up to where the data stop (a null: nothing recorded, the runtime stopped, a bad
+   * value), then a gap; the last value held to the edge (now, on the live edge); one x array for
+   * every pen, undefined where a pen has no point there (bridged), null for its gaps.
+   */
+  _compose() {
+    const edge = this._edge();
+    const columns = this.samples.map((samples, index) => {
+      const points = [];
+      const before = this.before[index];
+      if (before && (!samples.length || before[0] < samples[0][0])) points.push(before);
+      for (const point of samples) {
+        const previous = points[points.length - 1];
+        if (point[1] === null && previous && previous[1] !== null && point[0] - HOLD_END > previous[0]) points.push([point[0] - HOLD_END, previous[1]]);
+        points.push(point);
+      }
+      const last = points[points.length - 1];
+      if (last && last[1] !== null && edge > last[0]) points.push([edge, last[1]]);
+      return points;
+    });
     const times = new Set();
-    for (const samples of series) for (const [time] of samples) times.add(time);
+    for (const points of columns) for (const [time] of points) times.add(time);
     this.xs = [...times].sort((a, b) => a - b);
-    const index = new Map(this.xs.map((time, i) => [time, i]));
-    this.ys = series.map((samples) => {
+    const position = new Map(this.xs.map((time, i) => [time, i]));
+    this.ys = columns.map((points) => {
       const column = new Array(this.xs.length).fill(undefined);
-      for (const [time, value] of samples) column[index.get(time)] = value;
+      for (const [time, value] of points) column[position.get(time)] = value;
       return column;
     });
+    this.host.dataset.points = String(this.xs.length);
   }
 
   _append(time, values) {
     // values: one per pen (undefined: no new sample of that pen)
-    const last = this.xs.length ? this.xs[this.xs.length - 1] : -Infinity;
-    if (time < last) return;
-    if (time === last) {
-      values.forEach((value, i) => { if (value !== undefined) this.ys[i][this.xs.length - 1] = value; });
-      return;
-    }
-    this.xs.push(time);
-    values.forEach((value, i) => this.ys[i].push(value));
+    values.forEach((value, i) => {
+      if (value === undefined) return;
+      const samples = this.samples[i];
+      const last = samples.length ? samples[samples.length - 1] : null;
+      if (last && time < last[0]) return;
+      if (last && time === last[0]) last[1] = value;
+      else samples.push([time, value]);
+    });
   }
 
   // -- live tail ------------------------------------------------------------------------------
@@ -174,21 +234,22 @@ export class TrendChart {
     this._tick = setInterval(() => this._slide(), 1000);
   }
 
-  /** Move the window so it ends now (runtime clock), dropping what fell out of it. */
+  /** Move the window so it ends now (runtime clock), dropping what fell out of it; a paused window only redraws its edge. */
   _slide() {
-    if (!this.follow || !this.plot) return;
-    const span = this.end - this.start;
-    const now = Math.max(runtimeNow(this.ctx.session), this.xs.length ? this.xs[this.xs.length - 1] : 0);
-    this.end = now;
-    this.start = now - span;
-    let drop = 0;
-    while (drop < this.xs.length - 2 && this.xs[drop + 1] < this.start) drop += 1;  // keep one point before the window
-    if (drop) {
-      this.xs.splice(0, drop);
-      for (const column of this.ys) column.splice(0, drop);
+    if (!this.plot) return;
+    if (this.follow) {
+      const span = this.end - this.start;
+      const newest = Math.max(0, ...this.samples.map((samples) => (samples.length ? samples[samples.length - 1][0] : 0)));
+      this.end = Math.max(runtimeNow(this.ctx.session), newest);
+      this.start = this.end - span;
+      this.samples.forEach((samples, i) => {
+        let drop = 0;
+        while (drop < samples.length && samples[drop][0] < this.start) drop += 1;
+        if (drop) this.before[i] = samples.splice(0, drop).pop();  // the last one before the window holds into it
+      });
     }
+    this._compose();
     this._redraw();
-    this.host.dataset.points = String(this.xs.length);
     this.host.dataset.end = String(Math.round(this.end));
   }
 
@@ -202,7 +263,9 @@ export class TrendChart {
     }
     const compact = this.options.compact;
     const scales = { x: { time: true } };
-    const axes = [{ scale: 'x', stroke: '#5b6776', grid: { stroke: '#e6eaf0' }, ticks: { stroke: '#d5dbe3' }, size: compact ? 30 : 42 }];
+    // 24-hour times like every other page; ticks at least 80 px apart, so no label touches the next.
+    const axes = [{ scale: 'x', stroke: '#5b6776', grid: { stroke: '#e6eaf0' }, ticks: { stroke: '#d5dbe3' }, size: 50,
+      space: 80, values: timeLabels }];
     units.forEach((unit, i) => {
       scales[unit] = unit === 'on/off' ? { range: [-0.1, 1.1] } : { auto: true };
       axes.push({
@@ -227,12 +290,12 @@ export class TrendChart {
     const uPlot = this.uPlot;
     const { scales, axes } = this._axesAndScales();
     const stepped = uPlot.paths.stepped({ align: 1 });
-    const series = [{ label: 'time' }, ...this.pens.map((pen, i) => ({
+    const series = [{ label: 'time', value: (u, v) => (v === null || v === undefined ? '—' : fullTime(v)) }, ...this.pens.map((pen, i) => ({
       label: pen.unit ? `${pen.tag} (${pen.unit})` : pen.tag,
       scale: pen.type === 'bool' ? 'on/off' : (pen.unit || 'value'),
       stroke: pen.color || PALETTE[i % PALETTE.length],
       width: 1.75,
-      paths: pen.interpolation === 'stepped' ? stepped : undefined,
+      paths: (pen.stepped ?? pen.interpolation === 'stepped') ? stepped : undefined,
       points: { show: false },
       value: (u, v) => (v === null || v === undefined ? '—' : `${Number.isInteger(v) ? v : v.toFixed(Math.abs(v) >= 100 ? 1 : 3)}${pen.unit ? ` ${pen.unit}` : ''}`),
     }))];

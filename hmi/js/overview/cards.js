@@ -24,7 +24,7 @@ export class TaskCards {
     this.fleet = fleet;
     this.live = live;
     this.cards = fleet.tasks.map((task, index) => this._card(task, index, onOpen));
-    this.node = el('div', { class: 'task-cards side-stack' }, ...this.cards.map((card) => card.node));
+    this.node = el('div', { class: 'task-cards side-stack live-content' }, ...this.cards.map((card) => card.node));
   }
 
   names() {
@@ -41,17 +41,18 @@ export class TaskCards {
     const weight = figure('weight Tw');
     const goals = figure('goals');
     const badges = el('span', { class: 'badges' });
-    const robots = el('div', { class: 'small muted' });
+    const note = el('p', { class: 'task-note small', hidden: true });
+    const robots = el('div', { class: 'small muted team' });
     const node = el('section', { class: 'panel task-card', 'data-task': task.id, tabindex: 0, role: 'button', 'aria-label': `${task.name}: details` },
       el('div', { class: 'title' }, el('span', { class: 'task-dot' }), el('h2', { text: `${task.name}` }), el('span', { class: 'muted small', text: task.id }), badges),
-      input.node, output.node,
+      note, input.node, output.node,
       el('div', { class: 'task-figures' }, rate.node, weight.node, goals.node),
       robots,
     );
     node.querySelector('.task-dot').style.background = taskColor(index);  // CSSOM: allowed by the CSP, unlike style=""
     node.addEventListener('click', () => onOpen(task));
     node.addEventListener('keydown', (event) => { if (event.key === 'Enter') onOpen(task); });
-    return { task, index, node, input, output, rate, weight, goals, badges, robots };
+    return { task, index, node, input, output, rate, weight, goals, badges, note, robots };
   }
 
   update() {
@@ -69,28 +70,50 @@ export class TaskCards {
       showForced(card.rate.mark, anyForced(this.live, [tags.iFr]));
       showForced(card.weight.mark, anyForced(this.live, [tags.Tw]));
       showForced(card.goals.mark, anyForced(this.live, [tags.goals]));
+      // The team as the dispatchers count it (programs/teams.py): robots sent to the task's source
+      // until they have unloaded at its destination (currloc 1-4).
+      const serving = [];
+      this.fleet.robots.forEach((robot) => {
+        const where = value(robot.tags.currloc) || 0;
+        if (value(robot.tags.tcurr) === card.task.number && where >= 1 && where <= 4) serving.push(`${robot.id} ${CURRLOC_TEXT[where]}`);
+      });
+      const limit = card.task.max_team_size || 0;
+      card.team = { size: serving.length, limit, full: limit > 0 && serving.length >= limit };
+      const size = limit > 0 ? ` (${serving.length}/${limit})` : '';
+      setText(card.robots, serving.length ? `Team${size}: ${serving.join(' · ')}` : `No robot on this task now${limit > 0 ? ` (team of at most ${limit})` : ''}`);
       const inLevel = value(tags.iBL);
       if (typeof inLevel === 'number' && (!fullest || inLevel > fullest.level)) fullest = { card, level: inLevel };
       const tw = value(tags.Tw);
-      if (typeof tw === 'number' && (!lightest || tw < lightest.tw)) lightest = { card, tw, tie: false };
-      else if (typeof tw === 'number' && lightest && tw === lightest.tw) lightest.tie = true;
-      const serving = [];
-      this.fleet.robots.forEach((robot) => {
-        const current = value(robot.tags.tcurr);
-        const where = value(robot.tags.currloc) || 0;
-        if (current === card.task.number && (where > 0 || value(robot.tags.status))) serving.push(`${robot.id} ${CURRLOC_TEXT[where] || ''}`.trim());
-      });
-      setText(card.robots, serving.length ? `Robots: ${serving.join(' · ')}` : 'No robot on this task now');
+      card.tw = typeof tw === 'number' ? tw : null;
+      // The next free robot goes to the lowest weight among the tasks whose team has room.
+      if (card.tw !== null && !card.team.full) {
+        if (!lightest || card.tw < lightest.tw) lightest = { card, tw: card.tw, tie: false };
+        else if (card.tw === lightest.tw) lightest.tie = true;
+      }
     }
+    const next = lightest && !lightest.tie && this.cards.length > 1 ? lightest.card : null;
     for (const card of this.cards) {
       const bottleneck = fullest && fullest.card === card && fullest.level >= 50;
-      const next = lightest && !lightest.tie && lightest.card === card && this.cards.length > 1;
-      const key = `${bottleneck}|${next}`;
+      const team = card.team;
+      const nextHere = next === card;
+      // Why the next robot goes elsewhere, where an operator would expect it here: the bottleneck,
+      // or the lowest weight of all, whose team is full.
+      const lowest = card.tw !== null && this.cards.every((other) => other.tw === null || other.tw >= card.tw);
+      let why = '';
+      if (!nextHere && (bottleneck || lowest)) {
+        const elsewhere = next ? `the next free robot goes to ${next.task.name}` : 'no task has room for another robot';
+        if (team.full) why = `Its team is full (${team.size}/${team.limit}): ${elsewhere}.`;
+        else if (bottleneck && next && card.tw !== null) why = `Weight ${formatNumber(card.tw, 2)} is not the lowest: ${elsewhere} (weight ${formatNumber(next.tw, 2)}).`;
+      }
+      card.note.hidden = !why;
+      setText(card.note, why);
+      const key = `${bottleneck}|${nextHere}|${team.full}|${team.size}/${team.limit}`;
       if (card.badges.dataset.key === key) continue;
       card.badges.dataset.key = key;
       card.badges.replaceChildren(
         ...(bottleneck ? [el('span', { class: 'badge bottleneck', title: 'The fullest input buffer: production here is the first to stall', text: 'bottleneck' })] : []),
-        ...(next ? [el('span', { class: 'badge next', title: 'Lowest task weight: the next free robot goes here', text: 'next robot' })] : []),
+        ...(nextHere ? [el('span', { class: 'badge next', title: 'Lowest task weight among the tasks whose team has room: the next free robot goes here', text: 'next robot' })] : []),
+        ...(team.full ? [el('span', { class: 'badge full', title: `${team.size} robots serve this task, its most (max_team_size): no other robot is sent here until one has unloaded`, text: `team full ${team.size}/${team.limit}` })] : []),
       );
     }
   }
@@ -124,7 +147,7 @@ export class RobotList {
       node.addEventListener('keydown', (event) => { if (event.key === 'Enter') onOpen(robot); });
       return { robot, node, state, line2, mark };
     });
-    this.node = el('div', { class: 'robot-list' }, ...this.rows.map((row) => row.node));
+    this.node = el('div', { class: 'robot-list live-content' }, ...this.rows.map((row) => row.node));
   }
 
   names() {

@@ -48,7 +48,7 @@ export async function mount(root, ctx) {
       el('div', { class: 'panel-head' }, el('h1', { text: 'Alarms' }), counts),
       el('div', { class: 'toolbar' }, view, sort, ackAll, note),
       status,
-      el('div', { class: 'scroll-x' }, el('table', { class: 'data alarm-table' }, el('thead', {}, head), body))),
+      el('div', { class: 'scroll-x' }, el('table', { class: 'data alarm-table live-content' }, el('thead', {}, head), body))),
   );
 
   const units = new Map();  // tag → unit

@@ -11,7 +11,7 @@ export async function mount(root, ctx) {
   const engineer = isEngineer(ctx.session);
   const summary = el('p', { class: 'muted', role: 'status' });
   const body = el('tbody');
-  const table = el('table', { class: 'data forced-table' },
+  const table = el('table', { class: 'data forced-table live-content' },
     el('thead', {}, el('tr', {}, ...['Tag', 'Forced value', 'Before', 'Since', 'By', ''].map((text) => el('th', { text })))), body);
   const tools = el('div', { class: 'toolbar force-tools' });
   if (engineer) {

@@ -35,7 +35,7 @@ function mountFleet(root, ctx, plant) {
       el('div', { class: 'legend' },
         el('span', {}, el('i', { class: 'sw-src' }), 'input buffer level'),
         el('span', {}, el('i', { class: 'sw-dst' }), 'output storage level'),
-        el('span', {}, el('i', { class: 'sw-route' }), 'robot route, ✕ goal'),
+        el('span', {}, el('i', { class: 'sw-route' }), 'robot route; goal: ✕, or a dashed square round its station'),
         el('span', { text: 'ring: green moving · blue planning · amber blocked · red failed · grey idle' }),
         el('span', { text: 'click a robot or a station for its tags' }),
         el('span', { class: 'phone-only', text: 'drag the floor sideways to see all of it' }),

@@ -44,7 +44,7 @@ export async function mount(root, ctx) {
   })));
   const needs = model.tasks.map((task) => el('li', { text: `${task.id}: requires ${task.requires.join(', ').replaceAll('_', ' ') || 'nothing special'}; robots up to ${task.limits.max_size_mm.join(' × ')} mm, load ≥ ${task.limits.min_load_capacity}, ≥ ${task.limits.min_linear_speed} m/s; team of at most ${task.max_team_size}` }));
   root.append(
-    el('div', { class: 'grid-cards' }, ...cards),
+    el('div', { class: 'grid-cards live-content' }, ...cards),
     el('section', { class: 'panel' }, el('h2', { text: 'Which robot can serve which task' }),
       el('div', { class: 'scroll-x' }, el('table', { class: 'data matrix' }, el('thead', {}, head), el('tbody', {}, ...rows))),
       el('ul', { class: 'small muted' }, ...needs)),

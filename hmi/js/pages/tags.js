@@ -18,7 +18,7 @@ export async function mount(root, ctx) {
     el('span', { text: 'Tag' }), el('span', { text: 'Value' }), el('span', { class: 'qcol', text: 'Quality' }),
     el('span', { class: 'ts', text: 'Time' }), el('span', { class: 'range', text: 'Range' }), el('span', { class: 'acc', text: 'Access' }), el('span', { text: '' }));
   const spacer = el('div', { class: 'vspacer' });
-  const body = el('div', { class: 'vbody', tabindex: 0, role: 'rowgroup' }, spacer);
+  const body = el('div', { class: 'vbody live-content', tabindex: 0, role: 'rowgroup' }, spacer);
   root.append(el('div', { class: 'tags-page' },
     el('div', { class: 'toolbar' }, search, group, count),
     el('div', { class: 'vtable', role: 'table', 'aria-label': 'Tags' }, head, body)));

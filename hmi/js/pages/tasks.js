@@ -15,7 +15,7 @@ export async function mount(root, ctx) {
   const cells = new Map();  // tag → {node, kind}
   const bind = (tag, node, kind) => { cells.set(tag, { node, kind }); return node; };
 
-  const state = bind(model.state, el('span', { class: 'chip idle', text: '…' }), 'state');
+  const state = bind(model.state, el('span', { class: 'chip idle live-value', text: '…' }), 'state');
   const error = bind(model.error, el('p', { class: 'error-text', text: '' }), 'error');
   const time = bind(model.time, el('span', { class: 'num live-value' }), 'time');
   const actions = el('div', { class: 'toolbar' });
@@ -59,7 +59,7 @@ export async function mount(root, ctx) {
       el('div', { class: 'scroll-x' }, table), counters,
       el('h3', { text: `Programs (${task.programs.length})` }), ...programs);
   });
-  root.append(runtime, el('div', { class: 'grid-cards wide' }, ...cards));
+  root.append(runtime, el('div', { class: 'grid-cards wide live-content' }, ...cards));
 
   const update = (names) => {
     for (const name of names) {
@@ -69,7 +69,7 @@ export async function mount(root, ctx) {
       const value = item.v;
       switch (cell.kind) {
         case 'state':
-          cell.node.className = `chip ${value === 'RUNNING' ? 'ok' : value === 'ERROR' ? 'bad' : 'warn'}`;
+          cell.node.className = `chip live-value ${value === 'RUNNING' ? 'ok' : value === 'ERROR' ? 'bad' : 'warn'}`;
           setText(cell.node, value);
           break;
         case 'program-state':

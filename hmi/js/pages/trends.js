@@ -17,6 +17,21 @@ function localInput(seconds) {
   return `${date.getFullYear()}-${pad(date.getMonth() + 1)}-${pad(date.getDate())}T${pad(date.getHours())}:${pad(date.getMinutes())}:${pad(date.getSeconds())}`;
 }
 
+/**
+ * The pens of a first visit: what an operator of the plant watches — the recorded levels (unit %:
+ * the tasks' input buffers `*_iBL` first, then their output storages `*_qSL`, then other levels),
+ * else the first recorded numbers.
+ */
+export function defaultPens(plottable) {
+  const levels = plottable.filter((info) => info.unit === '%' && !info.type.startsWith('bool'));
+  if (levels.length) {
+    const rank = (info) => (/_iBL$/.test(info.tag) ? 0 : /_qSL$/.test(info.tag) ? 1 : 2);
+    return [...levels].sort((a, b) => rank(a) - rank(b)).slice(0, 4).map((info) => info.tag);  // a stable sort: names in order
+  }
+  const numbers = plottable.filter((info) => info.type.startsWith('float'));
+  return (numbers.length ? numbers : plottable).slice(0, 2).map((info) => info.tag);
+}
+
 function rememberedPens() {
   try { return (localStorage.getItem(PENS_KEY) || '').split(',').filter(Boolean); } catch { return []; }
 }
@@ -74,7 +89,7 @@ export async function mount(root, ctx) {
   }
 
   const wanted = (ctx.params.tags ? ctx.params.tags.split(',') : rememberedPens()).filter((tag) => known.has(tag) && known.get(tag).type !== 'string');
-  let pens = (wanted.length ? wanted : [plottable[0].tag]).slice(0, MAX_PENS).map((tag, i) => ({ ...known.get(tag), color: PALETTE[i % PALETTE.length] }));
+  let pens = (wanted.length ? wanted : defaultPens(plottable)).slice(0, MAX_PENS).map((tag, i) => ({ ...known.get(tag), color: PALETTE[i % PALETTE.length] }));
   let range = RANGES.some(([key]) => key === ctx.params.range) || ctx.params.range === 'custom' ? ctx.params.range : '10m';
   if (range === 'custom') {
     from.value = ctx.params.from ? localInput(Number(ctx.params.from)) : '';
@@ -89,9 +104,11 @@ export async function mount(root, ctx) {
     try { localStorage.setItem(PENS_KEY, pens.map((pen) => pen.tag).join(',')); } catch { /* private mode */ }
   };
   const showLive = () => {
-    live.className = `chip ${following ? 'ok' : 'idle'}`;
-    setText(live, following ? 'live' : 'paused');
-    live.title = following ? 'New values are appended as they come' : 'Not following: the range does not end now';
+    const cut = following && document.body.classList.contains('offline');  // the runtime is unreachable (main.js)
+    live.className = `chip ${cut ? 'bad' : following ? 'ok' : 'idle'}`;
+    setText(live, cut ? 'not live' : following ? 'live' : 'paused');
+    live.title = cut ? 'The runtime cannot be reached: the values end where it was lost'
+      : following ? 'New values are appended as they come' : 'Not following: the range does not end now';
     backToLive.hidden = following;
     for (const button of [...rangeButtons, customButton]) button.setAttribute('aria-pressed', button.dataset.range === range ? 'true' : 'false');
     custom.hidden = range !== 'custom';
@@ -182,9 +199,13 @@ export async function mount(root, ctx) {
   });
 
   await draw(true);
+  ctx.live.addEventListener('state', showLive);
+  ctx.live.addEventListener('synced', showLive);
   root.dataset.ready = '1';
   return () => {
     clearTimeout(refetch);
+    ctx.live.removeEventListener('state', showLive);
+    ctx.live.removeEventListener('synced', showLive);
     if (chart) chart.destroy();
   };
 }

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from typing import TYPE_CHECKING, Any
 
 from softplc.core.commands import CommandRefused, Permission
@@ -35,8 +35,10 @@ MAX_PLOT_POINTS = 10_000
 _RANGE = {"tag": "tag name", "start": "Unix seconds (runtime clock); omitted: open", "end": "Unix seconds; omitted: open"}
 
 
-def register_history_commands(plant: Plant, reader: HistoryReader, recorded: Mapping[str, TagInfo]) -> Callable[[], None]:
-    """Register the `history.*` commands over `reader`; `recorded`: the tags this plant records. Returns an unregister."""
+def register_history_commands(plant: Plant, reader: HistoryReader, recorded: Mapping[str, TagInfo],
+                              compressed: Collection[str] = ()) -> Callable[[], None]:
+    """Register the `history.*` commands over `reader`; `recorded`: the tags this plant records (`compressed`: those
+    with swinging-door compression). Returns an unregister."""
     run = plant.clock.run_blocking
 
     async def blocking(function: Callable[[], Any]) -> Any:
@@ -53,7 +55,10 @@ def register_history_commands(plant: Plant, reader: HistoryReader, recorded: Map
             raise CommandRefused(f"history is not readable now: {error}") from None
 
     def tags(arguments: Mapping[str, Any], origin: Any) -> list[dict[str, Any]]:
-        return [{"tag": info.name, "type": info.type, "unit": info.unit, "interpolation": "stepped" if info.stepped else "sloped"}
+        # `compressed`: the archive is a straight-line approximation (trends draw it sloped); every other
+        # tag's stored value holds until its next one, within its deadband (trends draw steps).
+        return [{"tag": info.name, "type": info.type, "unit": info.unit, "interpolation": "stepped" if info.stepped else "sloped",
+                 "compressed": info.name in compressed}
                 for info in sorted(recorded.values(), key=lambda info: info.name)]
 
     def aggregates(arguments: Mapping[str, Any], origin: Any) -> list[str]:

@@ -85,10 +85,10 @@ class HistoryReader:
         return [row[0] for row in self._query("SELECT DISTINCT plant FROM history_tags ORDER BY plant", ())]
 
     def span(self, tag: str) -> tuple[float, float] | None:
-        """Times of the first and last stored sample of `tag`, or None."""
+        """Times of the first and last stored sample of `tag` that hold a value (not the BAD end of a recording), or None."""
         tag_id, info = self._tag(tag)
-        first = self._edge(tag_id, info, -math.inf, before=False)
-        last = self._edge(tag_id, info, math.inf, before=True)
+        first = self._edge(tag_id, info, -math.inf, before=False, max_quality=1)
+        last = self._edge(tag_id, info, math.inf, before=True, max_quality=1)
         return (first.time, last.time) if first and last else None
 
     # -- raw ------------------------------------------------------------------------------
@@ -168,7 +168,7 @@ class HistoryReader:
                 return Plot(page.samples)
             rows = self._numeric_rows(tag_id, start, end)
             times, values = np.array([r[0] for r in rows], dtype=float), np.array([r[1] for r in rows], dtype=float)
-            return Plot(decimate(times, values, start, end, buckets), decimated=True, bucket=width)
+            return Plot(self._with_gaps(tag_id, decimate(times, values, start, end, buckets), start, end, width), decimated=True, bucket=width)
         inner_start = math.ceil(start / cell_width) * cell_width
         inner_end = max(inner_start, math.floor(end / cell_width) * cell_width)
         edges = self._numeric_rows(tag_id, start, inner_start) + self._numeric_rows(tag_id, inner_end, end)
@@ -181,7 +181,7 @@ class HistoryReader:
             return Plot(self.raw(tag, start, end).samples)
         times = np.array([row[0] for row in edges] + [c[1] for c in cells] + [c[3] for c in cells], dtype=float)
         values = np.array([row[1] for row in edges] + [c[2] for c in cells] + [c[4] for c in cells], dtype=float)
-        return Plot(decimate(times, values, start, end, buckets), decimated=True, bucket=width)
+        return Plot(self._with_gaps(tag_id, decimate(times, values, start, end, buckets), start, end, width), decimated=True, bucket=width)
 
     # -- processed and at time -------------------------------------------------------------
 
@@ -230,6 +230,15 @@ class HistoryReader:
             rows += self._query(f"SELECT time, value, text, quality FROM {table} WHERE tag = ? AND time >= ? AND time <= ? "
                                 "ORDER BY time, quality, value, text", (tag_id, begin, stop))
         return Series([_sample(row, info) for row in rows])
+
+    def _with_gaps(self, tag_id: int, samples: list[Sample], start: float, end: float, width: float) -> list[Sample]:
+        """Decimated `samples` with the first BAD sample of each bucket that has one: where the plot has no data."""
+        gaps: list[Sample] = []
+        for table in self._partitions(start, end):
+            rows = self._query(f"SELECT MIN(time) FROM {table} WHERE tag = ? AND time >= ? AND time < ? AND quality = 2 "
+                               "GROUP BY CAST((time - ?) / ? AS INTEGER)", (tag_id, start, end, start, width))
+            gaps += [Sample(float(when), math.nan, Quality.BAD) for (when,) in rows]
+        return sorted(samples + gaps, key=lambda sample: sample.time) if gaps else samples
 
     def _numeric_rows(self, tag_id: int, start: float, end: float) -> list[tuple[float, float]]:
         rows: list[tuple[float, float]] = []

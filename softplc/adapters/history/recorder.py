@@ -139,7 +139,8 @@ class HistoryRecorder:
         self.writer = writer
         # Reads for other adapters (OPC UA HistoryRead, trends) go through plant.commands.
         self._reader = HistoryReader(database, self.plant)
-        self._unregister = register_history_commands(plant, self._reader, {info.name: info for info in infos if info.name in plant.tags})
+        self._unregister = register_history_commands(plant, self._reader, {info.name: info for info in infos if info.name in plant.tags},
+                                                     {name for name, policy in self.policies.items() if policy.compression})
         db = plant.tags
         self.filters = {name: TagFilter(name, policy, self.types[name][0] != "string" and not self.types[name][0] == "bool")
                         for name, policy in self.policies.items() if name in db}
@@ -164,8 +165,13 @@ class HistoryRecorder:
         rows: list[Row] = []
         for tag_filter in self.filters.values():
             rows += tag_filter.release()
-        writer.put(SINK_NAME, rows)
+        # The end of recording: a BAD sample without a value for every tag (as PI's shutdown
+        # events), so a reader knows nothing was recorded until the next run — a trend draws a
+        # gap over the outage, not a line across it.
         assert self._plant is not None
+        end = max([self._plant.clock.wall(), *(row[1] for row in rows)])
+        rows += [(name, end, math.nan, Quality.BAD) for name in self.filters]
+        writer.put(SINK_NAME, rows)
         await self._plant.clock.run_blocking(writer.stop)
         self.writer = None
 

@@ -30,10 +30,10 @@ async def test_a_viewer_reads_history_as_plain_data(plant) -> None:
     runtime, _ = plant
     call = runtime.commands.call
     assert await call("history.tags", {}, VIEWER) == [
-        {"tag": "level", "type": "float64", "unit": "m", "interpolation": "sloped"},
-        {"tag": "note", "type": "string", "unit": "", "interpolation": "stepped"},
-        {"tag": "pressure", "type": "float64", "unit": "bar", "interpolation": "sloped"},
-        {"tag": "steps", "type": "int32", "unit": "", "interpolation": "stepped"}]
+        {"tag": "level", "type": "float64", "unit": "m", "interpolation": "sloped", "compressed": False},
+        {"tag": "note", "type": "string", "unit": "", "interpolation": "stepped", "compressed": False},
+        {"tag": "pressure", "type": "float64", "unit": "bar", "interpolation": "sloped", "compressed": False},
+        {"tag": "steps", "type": "int32", "unit": "", "interpolation": "stepped", "compressed": False}]
     assert "average" in await call("history.aggregates", {}, VIEWER)
     raw = await call("history.read_raw", {"tag": "pressure", "start": EPOCH + 15, "end": EPOCH + 45, "bounds": True}, VIEWER)
     assert raw == {"continuation": None, "samples": [

@@ -135,6 +135,21 @@ def test_a_day_is_plotted_in_at_most_n_points_and_no_spike_vanishes(store: Store
     assert len(month.samples) <= 500 and {99.0, -5.0, 120.0} <= {s.value for s in month.samples}
 
 
+def test_a_decimated_plot_keeps_its_gaps(store: Store) -> None:
+    rows = [("level", T0 + t, 50.0, GOOD) for t in range(30_000)]
+    rows.append(("level", T0 + 30_000, math.nan, BAD))  # the end of a recording: nothing until the next start
+    rows += [("level", T0 + t, 60.0, GOOD) for t in range(33_600, 86_400)]
+    store.write(rows)
+    # A day (the cells), a range read raw and decimated, and one that fits undecimated: the gap is in each.
+    for start, end, points in ((T0, T0 + 86_400, 500), (T0 + 29_950, T0 + 30_050, 40), (T0 + 29_990, T0 + 30_010, 40)):
+        plot = store.reader.plot("level", start, end, max_points=points)
+        assert plot.decimated == (points == 500 or end - start == 100)
+        gaps = [sample for sample in plot.samples if sample.quality is BAD]
+        assert [sample.time for sample in gaps] == [T0 + 30_000] and math.isnan(gaps[0].value)
+        assert [sample.time for sample in plot.samples] == sorted(sample.time for sample in plot.samples)
+        assert len(plot.samples) <= points
+
+
 def test_two_plants_share_one_store(storage_settings: StorageSettings) -> None:
     first = Store(storage_settings, plant="north")
     second = Store(storage_settings, plant="south")

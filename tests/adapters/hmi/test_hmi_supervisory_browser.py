@@ -207,7 +207,7 @@ async def test_the_trend_page_draws_recorded_history_and_follows_the_live_tail(b
     context, page, errors = await open_page(browser, plant.url + "#/trends?tags=limit,t01_iBL&range=10m")
     async with screenshot_on_failure(page, "trend-page"):
         await ready(page)
-        values = "(pen) => document.querySelector('#trend-chart').trendChart.ys[pen].filter((v) => v !== undefined && v !== null)"
+        values = "(pen) => document.querySelector('#trend-chart').trendChart.samples[pen].map(([, v]) => v).filter((v) => v !== null)"
         drawn = await page.evaluate(f"({values})(0)")
         assert [11.0, 22.0, 33.0] == [value for value in drawn if value in (11.0, 22.0, 33.0)]  # from the historian, in order
         assert await page.evaluate("() => document.querySelector('#trend-chart').trendChart.pens.map((p) => p.unit)") == ["bar", "%"]
