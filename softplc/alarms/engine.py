@@ -24,7 +24,7 @@ from softplc.alarms.messages import render
 from softplc.alarms.model import (
     AlarmSnapshot, AlarmState, Priority, Shelving, ShelveKind, Transition, Trigger, UnknownAlarm, effective_state, next_state, released_state,
 )
-from softplc.alarms.settings import AlarmDefinition, AlarmSettings
+from softplc.alarms.settings import AlarmDefinition, AlarmSettings, LimitLevel
 from softplc.clock import Clock
 from softplc.events import Event
 from softplc.suggest import did_you_mean
@@ -43,7 +43,7 @@ class Alarm:
     """One alarm's definition and mutable state (the engine's alone; adapters get snapshots)."""
 
     __slots__ = ("index", "definition", "check", "suppress", "plain", "fast", "watched", "low_edge", "high_edge", "alarm_values", "holds",
-                 "level", "active", "pending_due", "delay_generation", "annunciation",
+                 "level", "priority_level", "active", "pending_due", "delay_generation", "annunciation",
                  "shelving", "shelve_generation", "suppressed", "out_of_service", "since", "active_since", "last_transition",
                  "sequence", "message", "value", "comment", "comment_user")
 
@@ -69,6 +69,9 @@ class Alarm:
         elif self.plain and self.holds is not None:
             self.fast = 3
         self.level = ""  # "" while the process is normal (after delays)
+        # The level whose priority, severity and limit the alarm has: the last it was active in,
+        # kept when it returns to normal (ISA-18.2: an alarm's priority does not change as it clears).
+        self.priority_level = ""
         self.active = False
         self.pending_due: float | None = None  # an on/off delay running until then (clock time)
         self.delay_generation = 0
@@ -103,26 +106,26 @@ class Alarm:
 
     @property
     def priority(self) -> Priority:
-        if self.level and self.definition.levels:
-            for level in self.definition.levels:
-                if level.name == self.level:
-                    return level.priority
-        return self.definition.priority
+        level = self.level_definition()
+        return level.priority if level is not None else self.definition.priority
 
     @property
     def severity(self) -> int:
-        if self.level and self.definition.levels:
-            for level in self.definition.levels:
-                if level.name == self.level:
-                    return level.severity
-        return self.definition.severity
+        level = self.level_definition()
+        return level.severity if level is not None else self.definition.severity
 
     @property
     def limit(self) -> float | None:
-        if self.level and self.definition.levels:
+        """The limit of the level the alarm is in (None while normal)."""
+        level = self.level_definition() if self.level else None
+        return level.limit if level is not None else None
+
+    def level_definition(self) -> LimitLevel | None:
+        """The configured level the alarm's priority comes from (None: the alarm's own priority)."""
+        if self.priority_level and self.definition.levels:
             for level in self.definition.levels:
-                if level.name == self.level:
-                    return level.limit
+                if level.name == self.priority_level:
+                    return level
         return None
 
 
@@ -262,7 +265,7 @@ class AlarmEngine:
 
     def _activate(self, alarm: Alarm, level: str) -> None:
         before = self.counted(alarm)
-        alarm.active, alarm.level, alarm.active_since = True, level, self.clock.wall()
+        alarm.active, alarm.level, alarm.priority_level, alarm.active_since = True, level, level, self.clock.wall()
         self._render(alarm)
         self._annunciate(alarm, Trigger.ACTIVATE)
         self.recount(alarm, before)
@@ -271,7 +274,7 @@ class AlarmEngine:
     def _clear(self, alarm: Alarm) -> None:
         before = self.counted(alarm)
         alarm.active, alarm.level, alarm.active_since = False, "", None
-        alarm.value = self._watched_value(alarm)
+        self._render(alarm)  # the values at the clear; priority_level (priority, {level}, {limit}) stays
         self._annunciate(alarm, Trigger.CLEAR)
         self.recount(alarm, before)
         self.emit(alarm, Transition.CLEARED, before[4])
@@ -282,7 +285,7 @@ class AlarmEngine:
     def _change_level(self, alarm: Alarm, level: str) -> None:
         before = self.counted(alarm)
         escalates = (alarm.level, level) in _SEVERER or alarm.level[:2] != level[:2]
-        alarm.level = level
+        alarm.level = alarm.priority_level = level
         self._render(alarm)
         if escalates:
             self._annunciate(alarm, Trigger.REALARM)
@@ -350,9 +353,12 @@ class AlarmEngine:
         return self.db.value(alarm.definition.tag)
 
     def _render(self, alarm: Alarm) -> None:
+        """The message with the values at this transition; {level} and {limit} of the level it is in, or returned from."""
         definition = alarm.definition
         alarm.value = self._watched_value(alarm)
-        fields = {"value": alarm.value, "limit": alarm.limit, "level": alarm.level, "name": alarm.name, "tag": definition.tag}
+        level = alarm.level_definition()
+        fields = {"value": alarm.value, "limit": level.limit if level is not None else None, "level": alarm.priority_level,
+                  "name": alarm.name, "tag": definition.tag}
         alarm.message = render(definition.message, self.db.value, fields)
 
     def emit(self, alarm: Alarm, transition: Transition, previous: AlarmState, origin: Origin | None = None, comment: str = "") -> None:
