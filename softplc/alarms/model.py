@@ -200,6 +200,17 @@ class AlarmSnapshot:
     tags: tuple[str, ...] = field(default=())  # every tag the alarm reads
     limits: tuple[tuple[str, float], ...] = ()  # limit alarms: (level, limit) of each level configured
 
+    @classmethod
+    def from_fields(cls, fields: dict[str, Any]) -> AlarmSnapshot:
+        """The same as `AlarmSnapshot(**fields)` with every field given, made at once.
+
+        The engine's hot path (an alarm flood makes thousands a second): a frozen dataclass's
+        __init__ sets each of its 26 fields through object.__setattr__, three times slower.
+        """
+        snapshot = object.__new__(cls)
+        snapshot.__dict__.update(fields)
+        return snapshot
+
     @property
     def acknowledged(self) -> bool:
         return not self.annunciation.needs_acknowledgement
