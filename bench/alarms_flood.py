@@ -23,6 +23,7 @@ EventQueueOverflow event arrived in between.
     .venv/bin/python bench/alarms_flood.py                       # 10 s flood + 10 s baseline
     .venv/bin/python bench/alarms_flood.py --seconds 30 --per-scan 100   # 1,000 transitions/s
     .venv/bin/python bench/alarms_flood.py --profile flood.prof  # cProfile of the runtime during the flood
+    .venv/bin/python bench/alarms_flood.py --simulated           # CPU per transition, simulated clock, no servers
     chrt -f 5 .venv/bin/python bench/alarms_flood.py             # on a busy shared machine (SCHED_FIFO; root)
 """
 
@@ -266,6 +267,42 @@ async def run(directory: Path, seconds: float, count: int, per_scan: int, alarms
     return figures
 
 
+async def simulated_cost(directory: Path, count: int, per_scan: int, seconds: float) -> tuple[int, float, float]:
+    """The alarm engine alone (no servers) on the simulated clock: transitions, CPU s in evaluations (journal rows included), process CPU s."""
+    from softplc.adapters import build_adapters
+    from softplc.clock import SimClock
+    from softplc.config import load_config
+    from softplc.runtime import Runtime
+    from softplc.tagdb import Origin
+
+    path = directory / "tagdb.yaml"
+    path.write_text(plant(count, per_scan, True).replace('opcua: {endpoint: "opc.tcp://127.0.0.1:0/softplc/"}', "opcua: {enabled: false}"))
+    config = load_config(path)
+    runtime = Runtime(config, SimClock(), state_dir=directory / "state", retain=False)
+    for adapter in build_adapters(config, None):
+        runtime.add_adapter(adapter)
+    alarms = next(adapter for adapter in runtime.adapters if adapter.name == "alarms")
+    evaluate, spent = alarms.evaluate, [0.0]
+
+    def timed() -> None:
+        started = time.thread_time()
+        evaluate()
+        spent[0] += time.thread_time() - started
+
+    alarms.evaluate = timed  # type: ignore[method-assign]
+    published = [0]
+    runtime.events.subscribe(lambda event: published.__setitem__(0, published[0] + 1), kinds=("alarm",))
+
+    async def flood() -> None:
+        await runtime.running.wait()
+        runtime.db.submit([("flooding", True)], Origin("bench", role=None))
+
+    runtime.spawn(flood(), "flood")
+    cpu = time.process_time()
+    await runtime.run(duration=seconds)
+    return published[0], spent[0], time.process_time() - cpu
+
+
 def verdict(met: bool) -> str:
     return "met" if met else "GOAL MISSED"
 
@@ -303,10 +340,18 @@ def main() -> None:
     parser.add_argument("--read-every", type=float, default=1.0, help="seconds between the starts of two `softplc read`s")
     parser.add_argument("--profile", type=Path, help="write a cProfile of the runtime during the flood here")
     parser.add_argument("--no-baseline", action="store_true", help="only the flood")
+    parser.add_argument("--simulated", action="store_true",
+                        help="only the CPU cost per transition: the alarm engine and its journal on the simulated clock, no servers")
     parser.add_argument("--subscriber", metavar="ENDPOINT", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.subscriber:
         asyncio.run(subscribe(args.subscriber))
+        return
+    if args.simulated:
+        with tempfile.TemporaryDirectory(prefix="softplc-flood-") as directory:
+            transitions, evaluating, process = asyncio.run(simulated_cost(Path(directory), args.alarms, args.per_scan, args.seconds))
+        print(f"simulated {args.seconds:g} s: {transitions} transitions; evaluation (with the journal rows) {evaluating:.2f} s of CPU = "
+              f"{evaluating / max(1, transitions) * 1e6:.1f} µs a transition; the whole process {process:.2f} s of CPU")
         return
     print(f"# {args.alarms} alarms, {args.per_scan * 10} transitions/s for {args.seconds:g} s, OPC UA subscriber, "
           f"softplc read every {args.read_every:g} s; load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
