@@ -1,7 +1,7 @@
 """Alarms (ISA-18.2): definitions from the `alarms:` section, the engine, the journal (docs/alarms.md).
 
 Adapters (OPC UA, HMI, CLI) never import the engine: they call the `alarms.*` commands
-(`runtime.commands`) and subscribe to `alarm` events (`runtime.events`); what they may import
+(`plant.commands`) and subscribe to `alarm` events (`plant.events`); what they may import
 is the plain data model, `softplc.adapters.alarms.model`.
 """
 

@@ -95,11 +95,13 @@ class AlarmsAdapter:
         """Evaluate the alarms and refresh the summary tags (at a scan boundary)."""
         engine = self.engine
         summary = self._summary
-        assert engine is not None and summary is not None
-        engine.evaluate()
+        assert engine is not None and summary is not None and self.journal is not None
+        with self.journal.batch():  # the rows of this boundary's transitions, to the writer at once
+            engine.evaluate()
         if engine.changed or summary.requested():
             engine.changed = False
-            summary.publish(engine.active_count, engine.unacknowledged_count, engine.highest_active_priority, engine.shelved_count)
+            summary.publish(engine.active_count, engine.unacknowledged_count, engine.highest_active_priority, engine.shelved_count,
+                            engine.flood.rate, engine.flood.flooding)
 
     async def _tick(self, plant: Plant) -> None:
         while self._running:

@@ -2,7 +2,7 @@
 
     name                   permission   arguments
     alarms.list            view         state, name (pattern), priority (lowest shown)
-    alarms.summary         view         —  (counts and the most severe unacknowledged alarm: the HMI banner)
+    alarms.summary         view         —  (counts, the flood, the most severe unacknowledged alarm: the HMI banner)
     alarms.journal         view         alarm, since, until, text, user, transition, limit, offset, plant
     alarms.acknowledge     acknowledge  alarm, comment
     alarms.acknowledge_all acknowledge  comment
@@ -60,6 +60,7 @@ def register_alarm_commands(commands: Commands, engine: AlarmEngine, actions: Al
             "alarms": len(engine.alarms), "active": engine.active_count, "unacknowledged": engine.unacknowledged_count,
             "shelved": engine.shelved_count, "highest_priority": engine.highest_active_priority,
             "shelve_max": engine.settings.shelve_max,
+            "rate": engine.flood.rate, "flood": engine.flood.flooding, "flood_since": engine.flood.since,
             "most_severe_unacknowledged": engine.snapshot(worst).to_dict() if worst is not None else None,
         }
 

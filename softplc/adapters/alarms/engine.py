@@ -16,114 +16,28 @@ from __future__ import annotations
 import heapq
 import itertools
 import logging
-import math
 from collections.abc import Callable, Iterable, Sequence
 
-from softplc.adapters.alarms.evaluation import ON, Check, DiscreteCheck, IncreaseCheck, LimitCheck, compile_condition, make_check
-from softplc.adapters.alarms.messages import render
-from softplc.adapters.alarms.model import (
-    AlarmSnapshot, AlarmState, Priority, Shelving, ShelveKind, Transition, Trigger, UnknownAlarm, effective_state, next_state, released_state,
-)
-from softplc.adapters.alarms.settings import AlarmDefinition, AlarmSettings
+from softplc.adapters.alarms.alarm import Alarm
+from softplc.adapters.alarms.evaluation import ON, IncreaseCheck, compile_condition, make_check
+from softplc.adapters.alarms.flood import FLOOD_ABOVE, FLOOD_ENDS_BELOW, WINDOW, FloodWatch
+from softplc.adapters.alarms.model import AlarmSnapshot, AlarmState, ShelveKind, Transition, Trigger, UnknownAlarm, next_state, released_state
+from softplc.adapters.alarms.settings import AlarmSettings
 from softplc.core.clock import Clock
 from softplc.core.events import Event
 from softplc.util.suggest import did_you_mean
 from softplc.core.tagdb import Origin, TagDatabase
 from softplc.core.tags import Tag
 
+__all__ = ["Alarm", "AlarmEngine"]
+
 log = logging.getLogger(__name__)
 
 _DELAY, _SHELVE, _WINDOW = "delay", "shelve", "window"
-_ACTIVE_STATES = frozenset({AlarmState.UNACKNOWLEDGED, AlarmState.ACKNOWLEDGED})
-_WAITING = frozenset(state for state in AlarmState if state.needs_acknowledgement)
+# Compared by identity in the hot path (an Enum's hash is computed in Python).
+_UNACKNOWLEDGED, _ACKNOWLEDGED, _RETURNED, _LATCHED, _SHELVED = (
+    AlarmState.UNACKNOWLEDGED, AlarmState.ACKNOWLEDGED, AlarmState.RETURNED, AlarmState.LATCHED, AlarmState.SHELVED)
 _SEVERER = {("hi", "hihi"), ("lo", "lolo")}  # (from, to) pairs that escalate on the same side
-
-
-class Alarm:
-    """One alarm's definition and mutable state (the engine's alone; adapters get snapshots)."""
-
-    __slots__ = ("index", "definition", "check", "suppress", "plain", "fast", "watched", "low_edge", "high_edge", "alarm_values", "holds",
-                 "level", "active", "pending_due", "delay_generation", "annunciation",
-                 "shelving", "shelve_generation", "suppressed", "out_of_service", "since", "active_since", "last_transition",
-                 "sequence", "message", "value", "comment", "comment_user")
-
-    def __init__(self, index: int, definition: AlarmDefinition, check: Check, suppress: Callable[[], object] | None) -> None:
-        self.index = index
-        self.definition = definition
-        self.check = check
-        self.suppress = suppress  # the compiled suppress_when
-        # No suppression and no counting window: evaluated inline by AlarmEngine.evaluate.
-        self.plain = definition.suppress_when is None and not isinstance(check, IncreaseCheck)
-        # A plain limit alarm that is normal stays normal while its tag is between its edges, a
-        # plain discrete one while its tag is none of its alarm values: the engine tests that
-        # inline, without calling the check (most alarms, most scans). fast: 1 limit, 2 discrete,
-        # 3 a condition (its compiled expression called inline).
-        self.fast = 0
-        self.holds: Callable[[], object] | None = getattr(check, "holds", None)
-        self.watched: Tag | None = None
-        self.low_edge, self.high_edge, self.alarm_values = math.inf, -math.inf, frozenset[object]()
-        if self.plain and isinstance(check, LimitCheck):
-            self.fast, self.watched, self.low_edge, self.high_edge = 1, check.tag, check.low_edge, check.high_edge
-        elif self.plain and isinstance(check, DiscreteCheck) and check.mode == "value":
-            self.fast, self.watched, self.alarm_values = 2, check.tag, frozenset(check.values)
-        elif self.plain and self.holds is not None:
-            self.fast = 3
-        self.level = ""  # "" while the process is normal (after delays)
-        self.active = False
-        self.pending_due: float | None = None  # an on/off delay running until then (clock time)
-        self.delay_generation = 0
-        self.annunciation = AlarmState.NORMAL
-        self.shelving: Shelving | None = None
-        self.shelve_generation = 0
-        self.suppressed = False
-        self.out_of_service = False
-        self.since = 0.0
-        self.active_since: float | None = None
-        self.last_transition = ""
-        self.sequence = 0
-        self.message = ""
-        self.value: object = None
-        self.comment = ""
-        self.comment_user = ""
-
-    @property
-    def name(self) -> str:
-        return self.definition.name
-
-    @property
-    def hidden(self) -> bool:
-        return self.shelving is not None or self.suppressed or self.out_of_service
-
-    @property
-    def state(self) -> AlarmState:
-        if not (self.out_of_service or self.suppressed or self.shelving is not None):
-            return self.annunciation  # the usual case, without a call
-        return effective_state(self.annunciation, shelved=self.shelving is not None, suppressed=self.suppressed,
-                               out_of_service=self.out_of_service)
-
-    @property
-    def priority(self) -> Priority:
-        if self.level and self.definition.levels:
-            for level in self.definition.levels:
-                if level.name == self.level:
-                    return level.priority
-        return self.definition.priority
-
-    @property
-    def severity(self) -> int:
-        if self.level and self.definition.levels:
-            for level in self.definition.levels:
-                if level.name == self.level:
-                    return level.severity
-        return self.definition.severity
-
-    @property
-    def limit(self) -> float | None:
-        if self.level and self.definition.levels:
-            for level in self.definition.levels:
-                if level.name == self.level:
-                    return level.limit
-        return None
 
 
 class AlarmEngine:
@@ -155,6 +69,7 @@ class AlarmEngine:
         self._active_ranks = [0] * 5  # active alarms per priority rank (1..4)
         self.changed = False  # a transition since the summary last looked
         self.evaluations = 0
+        self.flood = FloodWatch()
 
     # -- what to evaluate -----------------------------------------------------------------
 
@@ -168,8 +83,12 @@ class AlarmEngine:
         return self._timers[0][0] if self._timers else None
 
     def evaluate(self) -> None:
-        """At a scan boundary: fire due timers, then evaluate every marked alarm."""
+        """At a scan boundary: fire due timers, evaluate every marked alarm, then look at the alarm rate (floods)."""
         now = self.clock.now()
+        self._evaluate_due(now)
+        self._watch_flood(now)
+
+    def _evaluate_due(self, now: float) -> None:
         timers = self._timers
         dirty = self._dirty
         while timers and timers[0][0] <= now:
@@ -262,7 +181,8 @@ class AlarmEngine:
 
     def _activate(self, alarm: Alarm, level: str) -> None:
         before = self.counted(alarm)
-        alarm.active, alarm.level, alarm.active_since = True, level, self.clock.wall()
+        alarm.active, alarm.active_since = True, self.clock.wall()
+        alarm.enter_level(level)
         self._render(alarm)
         self._annunciate(alarm, Trigger.ACTIVATE)
         self.recount(alarm, before)
@@ -270,8 +190,9 @@ class AlarmEngine:
 
     def _clear(self, alarm: Alarm) -> None:
         before = self.counted(alarm)
-        alarm.active, alarm.level, alarm.active_since = False, "", None
-        alarm.value = self._watched_value(alarm)
+        alarm.active, alarm.active_since = False, None
+        alarm.enter_level("")
+        self._render(alarm)  # the values at the clear; priority_level (priority, {level}, {limit}) stays
         self._annunciate(alarm, Trigger.CLEAR)
         self.recount(alarm, before)
         self.emit(alarm, Transition.CLEARED, before[4])
@@ -282,7 +203,7 @@ class AlarmEngine:
     def _change_level(self, alarm: Alarm, level: str) -> None:
         before = self.counted(alarm)
         escalates = (alarm.level, level) in _SEVERER or alarm.level[:2] != level[:2]
-        alarm.level = level
+        alarm.enter_level(level)
         self._render(alarm)
         if escalates:
             self._annunciate(alarm, Trigger.REALARM)
@@ -314,6 +235,22 @@ class AlarmEngine:
         state = next_state(alarm.annunciation, trigger, latching=alarm.definition.latching)
         if state is not None:
             alarm.annunciation = state
+            if state is _UNACKNOWLEDGED and trigger is not Trigger.ACKNOWLEDGE:
+                self.flood.annunciated(self.clock.now())  # an alarm the operator is shown (activated or re-alarmed)
+
+    def _watch_flood(self, now: float) -> None:
+        flood = self.flood
+        rate = flood.rate
+        if flood.update(now, self.clock.wall()):
+            if flood.flooding:
+                log.warning("alarm flood: %s annunciated within %s (ISA-18.2: more than %d is a flood); "
+                            "_sys.alarms.flood is true until fewer than %d come within it",
+                            _alarms(flood.rate), _minutes(WINDOW), FLOOD_ABOVE, FLOOD_ENDS_BELOW)
+            else:
+                log.info("alarm flood over: %s annunciated within %s", _alarms(flood.rate), _minutes(WINDOW))
+            self.changed = True
+        elif flood.rate != rate:
+            self.changed = True
 
     def hide_or_release(self, alarm: Alarm, was_hidden: bool) -> None:
         if alarm.hidden:
@@ -323,8 +260,9 @@ class AlarmEngine:
 
     def counted(self, alarm: Alarm) -> tuple[bool, bool, bool, int, AlarmState]:
         state = alarm.state
-        active = state in _ACTIVE_STATES
-        return active, state in _WAITING, state is AlarmState.SHELVED, alarm.priority.rank if active else 0, state
+        active = state is _UNACKNOWLEDGED or state is _ACKNOWLEDGED
+        waiting = state is _UNACKNOWLEDGED or state is _RETURNED or state is _LATCHED
+        return active, waiting, state is _SHELVED, alarm.rank if active else 0, state
 
     def recount(self, alarm: Alarm, before: tuple[bool, bool, bool, int, AlarmState]) -> None:
         after = self.counted(alarm)
@@ -350,23 +288,24 @@ class AlarmEngine:
         return self.db.value(alarm.definition.tag)
 
     def _render(self, alarm: Alarm) -> None:
-        definition = alarm.definition
-        alarm.value = self._watched_value(alarm)
-        fields = {"value": alarm.value, "limit": alarm.limit, "level": alarm.level, "name": alarm.name, "tag": definition.tag}
-        alarm.message = render(definition.message, self.db.value, fields)
+        """The message with the values at this transition; {level} and {limit} of the level it is in, or returned from."""
+        alarm.value = value = alarm.watched.value if alarm.watched is not None else self._watched_value(alarm)
+        fields = {"value": value, "limit": alarm.level_limit, "level": alarm.priority_level, "name": alarm.definition.name,
+                  "tag": alarm.definition.tag}
+        alarm.message = alarm.template.render(self.db.value, fields)
 
     def emit(self, alarm: Alarm, transition: Transition, previous: AlarmState, origin: Origin | None = None, comment: str = "") -> None:
         """Publish one transition or action of `alarm` as an `alarm` event."""
         alarm.sequence += 1
-        alarm.last_transition = transition.value
+        alarm.last_transition = transition._value_
         now = self.clock.wall()
         if transition is not Transition.COMMENTED:  # a comment changes no state
             alarm.since = now
         self.changed = True
         data = {
-            "transition": transition.value,
+            "transition": transition._value_,  # an Enum's .value is a descriptor call; _value_ a plain attribute
             "alarm": self.snapshot(alarm),
-            "previous": previous.value,
+            "previous": previous._value_,
             "user": origin.user if origin is not None else "",
             "origin": str(origin) if origin is not None else "",
             "role": origin.role.value if origin is not None and origin.role is not None else "",
@@ -383,17 +322,7 @@ class AlarmEngine:
         return alarm
 
     def snapshot(self, alarm: Alarm) -> AlarmSnapshot:
-        definition = alarm.definition
-        return AlarmSnapshot(
-            name=alarm.name, kind=definition.kind, tag=definition.source, group=definition.group,
-            description=definition.description, priority=alarm.priority, severity=alarm.severity, state=alarm.state,
-            annunciation=alarm.annunciation, active=alarm.active, message=alarm.message or alarm.name, value=alarm.value,
-            level=alarm.level, limit=alarm.limit, latching=definition.latching, shelving=alarm.shelving,
-            suppressed=alarm.suppressed, out_of_service=alarm.out_of_service, since=alarm.since,
-            active_since=alarm.active_since, last_transition=alarm.last_transition, sequence=alarm.sequence,
-            comment=alarm.comment, comment_user=alarm.comment_user, tags=definition.reads,
-            limits=definition.limits,
-        )
+        return alarm.snapshot()
 
     def snapshots(self, alarms: Iterable[Alarm] | None = None) -> list[AlarmSnapshot]:
         return [self.snapshot(alarm) for alarm in (self.alarms if alarms is None else alarms)]
@@ -402,3 +331,11 @@ class AlarmEngine:
         """Expire `alarm`'s current shelving at clock time `due`."""
         alarm.shelve_generation += 1
         self._push(due, alarm, alarm.shelve_generation, _SHELVE)
+
+
+def _alarms(count: int) -> str:
+    return f"{count} alarm" if count == 1 else f"{count} alarms"
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds / 60:g} minutes"

@@ -39,7 +39,7 @@ SECTION = "alarms"
 DEFAULT_SHELVE_MAX = 8 * 3600.0
 _HIGH = {"hihi": True, "hi": True, "lo": False, "lolo": False}
 _DEFAULT_MESSAGES = {
-    "limit": "{name}: {tag} = {value} beyond the {level} limit {limit}",
+    "limit": "{name}: {tag} = {value} ({level} limit {limit})",  # true at the activation and at the clear
     "discrete": "{name}: {tag} = {value}",
     "increase": "{name}: {tag} rose to {value}",
 }

@@ -1,8 +1,9 @@
 """The OPC UA side of an alarm: its condition's event object and its nodes (for conditions.py).
 
 asyncua 2.1 has the event classes (`asyncua.common.event_objects`) but fills none of the
-condition fields; `new_event` makes a condition's event object once and `fill` brings it to an
-alarm snapshot's state (with a new EventId) before each trigger. The nodes are made directly as
+condition fields; `new_event` makes a condition's event object once, `note` follows every alarm
+event of the condition (cheaply), and `fill` brings the object to the latest one (with a new
+EventId) when a client is to get it. The nodes are made directly as
 asyncua `NodeData`, as `address_space.py` makes the tags' (its attribute service lets clients
 write nothing but tag values).
 """
@@ -96,8 +97,35 @@ def fix_types(event: Any) -> None:
             event.data_types[name] = _TYPE_FIXES.get(data_type.Identifier, ua.VariantType.Variant)
 
 
-def fill(condition: Any, snapshot: AlarmSnapshot, event: Event, shelve_max: float) -> None:
-    """Update the condition's event object to the snapshot's state, with a new EventId."""
+_STATES = ("ActiveState", "AckedState", "SuppressedState", "OutOfServiceState", "LatchedState")
+
+
+def note(condition: Any, event: Event) -> None:
+    """Follow one event of the condition, delivered or not: its latest state, since when each two-state variable holds.
+
+    Cheap (a flood brings thousands a second); `fill` makes the event object only when a client
+    is to get it.
+    """
+    snapshot: AlarmSnapshot = event.data["alarm"]
+    states = (snapshot.active, snapshot.acknowledged, snapshot.suppressed, snapshot.out_of_service, snapshot.state is AlarmState.LATCHED)
+    if states != condition.states:
+        for name, before, after in zip(_STATES, condition.states, states):
+            if before != after:
+                condition.changed_at[name] = event.time
+        condition.states = states
+    condition.last_severity = condition.severity or snapshot.severity
+    condition.severity = snapshot.severity
+    condition.retained = snapshot.state.annunciated or snapshot.active
+    condition.latest = event
+
+
+def fill(condition: Any, shelve_max: float) -> None:
+    """Bring the condition's event object to its latest noted event, with a new EventId."""
+    event: Event = condition.latest
+    if condition.filled is event:
+        return
+    condition.filled = event
+    snapshot: AlarmSnapshot = event.data["alarm"]
     target = condition.event
     data = event.data
     now = datetime.now(timezone.utc)
@@ -108,22 +136,22 @@ def fill(condition: Any, snapshot: AlarmSnapshot, event: Event, shelve_max: floa
     target.EventId = event_id
     target.Time, target.ReceiveTime = stamp, now
     target.Message = ua.LocalizedText(snapshot.message)
-    target.LastSeverity, target.Severity = condition.severity or snapshot.severity, snapshot.severity
-    condition.severity = snapshot.severity
-    condition.retained = target.Retain = state.annunciated or snapshot.active
+    target.LastSeverity, target.Severity = condition.last_severity, snapshot.severity
+    target.Retain = condition.retained
     target.ClientUserId = data.get("user", "")
     target.Comment = ua.LocalizedText(snapshot.comment)
     enabled = not snapshot.out_of_service
     target.EnabledState, target.__dict__["EnabledState/Id"] = ua.LocalizedText("Enabled" if enabled else "Disabled"), enabled
     level = _LEVEL_TEXT.get(snapshot.level, "")
     active_text = ("Active " + level).strip() if snapshot.active else "Inactive"
-    _state(target, "ActiveState", snapshot.active, active_text, stamp)
+    changed_at = condition.changed_at
+    _state(target, "ActiveState", snapshot.active, active_text, changed_at)
     target.__dict__["ActiveState/EffectiveDisplayName"] = ua.LocalizedText(active_text)
-    _state(target, "AckedState", snapshot.acknowledged, "Acknowledged" if snapshot.acknowledged else "Unacknowledged", stamp)
-    _state(target, "SuppressedState", snapshot.suppressed, "Suppressed" if snapshot.suppressed else "Unsuppressed", stamp)
-    _state(target, "OutOfServiceState", snapshot.out_of_service, "Out of Service" if snapshot.out_of_service else "In Service", stamp)
+    _state(target, "AckedState", snapshot.acknowledged, "Acknowledged" if snapshot.acknowledged else "Unacknowledged", changed_at)
+    _state(target, "SuppressedState", snapshot.suppressed, "Suppressed" if snapshot.suppressed else "Unsuppressed", changed_at)
+    _state(target, "OutOfServiceState", snapshot.out_of_service, "Out of Service" if snapshot.out_of_service else "In Service", changed_at)
     latched = state is AlarmState.LATCHED
-    _state(target, "LatchedState", latched, "Latched" if latched else "Unlatched", stamp)
+    _state(target, "LatchedState", latched, "Latched" if latched else "Unlatched", changed_at)
     shelving = snapshot.shelving
     text, state_id = _SHELVING[shelving.kind if shelving is not None else None]
     target.ShelvingState = target.__dict__["ShelvingState/CurrentState"] = ua.LocalizedText(text)
@@ -136,13 +164,11 @@ def fill(condition: Any, snapshot: AlarmSnapshot, event: Event, shelve_max: floa
             setattr(target, _LEVEL_FIELDS[level_name], float(limit))
 
 
-def _state(target: Any, name: str, value: bool, text: str, stamp: datetime) -> None:
+def _state(target: Any, name: str, value: bool, text: str, changed_at: dict[str, float]) -> None:
     fields = target.__dict__
-    previous = fields.get(f"{name}/Id")
     setattr(target, name, ua.LocalizedText(text))
     fields[f"{name}/Id"] = value
-    if previous is None or previous != value:
-        fields[f"{name}/TransitionTime"] = stamp
+    fields[f"{name}/TransitionTime"] = datetime.fromtimestamp(changed_at[name], timezone.utc)
 
 
 # -- nodes ----------------------------------------------------------------------------------------

@@ -9,7 +9,9 @@ needs on top of the `alarms.*` commands and `alarm` events (it never imports the
 - an event for every transition (AlarmConditionType fields: EventId, SourceNode, SourceName,
   Time, Severity, Message, ConditionName, Retain, Enabled/Active/Acked/Suppressed/OutOfService/
   Latched states, ShelvingState, SuppressedOrShelved, MaxTimeShelved, Comment, ClientUserId…),
-  emitted on the Server object and on the folder of the watched tag (both are event notifiers);
+  emitted on the Server object and on the folder of the watched tag (both are event notifiers),
+  delivered off the scan by `condition_delivery.py` (paced; an overflow event where a flood or a
+  slow client made it leave events out);
 - methods, role-checked by the command registry: Acknowledge, AddComment, TimedShelve(2),
   OneShotShelve(2), Unshelve(2), Enable/Disable and PlaceInService/RemoveFromService (out of
   service: engineer), ConditionRefresh and ConditionRefresh2. Confirm is not supported.
@@ -28,9 +30,10 @@ from typing import TYPE_CHECKING, Any
 from asyncua import Server, ua
 from asyncua.common import event_objects
 
-from softplc.adapters.alarms.model import AlarmSnapshot, NothingToAcknowledge, NotShelved, ServiceUnchanged, ShelvingTimeOutOfRange, UnknownAlarm
+from softplc.adapters.alarms.model import NothingToAcknowledge, NotShelved, ServiceUnchanged, ShelvingTimeOutOfRange, UnknownAlarm
 from softplc.core.events import Event
 from softplc.adapters.opcua.commands import call_command, current_origin, current_session_id, install_caller_context
+from softplc.adapters.opcua.condition_delivery import ConditionDelivery
 from softplc.adapters.opcua.condition_events import EventTypeId, attribute_value, fill, fix_types, link, make_node, new_event, parent_folder
 from softplc.core.tagdb import Origin
 
@@ -63,6 +66,11 @@ class _Condition:
     event_ids: deque[bytes] = field(default_factory=lambda: deque(maxlen=MAX_EVENT_IDS))
     retained: bool = False
     severity: int = 0
+    last_severity: int = 0
+    states: tuple[bool | None, ...] = (None,) * 5  # Active, Acked, Suppressed, OutOfService, Latched as last noted
+    changed_at: dict[str, float] = field(default_factory=dict)  # when each of them last changed (wall-clock s)
+    latest: Event | None = None  # the last alarm event noted
+    filled: Event | None = None  # the one the event object holds
 
 
 class AlarmConditions:
@@ -76,8 +84,7 @@ class AlarmConditions:
         self.by_name: dict[str, _Condition] = {}
         self.notifiers: list[ua.NodeId] = [_SERVER]
         self.shelve_max = 0.0
-        self._queue: deque[Event] = deque()
-        self._wake = asyncio.Event()
+        self.delivery: ConditionDelivery | None = None
         self._task: asyncio.Task[None] | None = None
         self._unsubscribe: Any = None
 
@@ -92,8 +99,9 @@ class AlarmConditions:
         conditions.shelve_max = float((await plant.commands.call("alarms.summary", {}, INTERNAL))["shelve_max"])
         conditions._build(snapshots)
         conditions._bind_methods()
-        conditions._unsubscribe = plant.events.subscribe(conditions._on_event, kinds=("alarm",))
-        conditions._task = asyncio.get_running_loop().create_task(conditions._drain(), name="opcua-conditions")
+        conditions.delivery = delivery = ConditionDelivery(server, conditions.by_name, conditions.shelve_max)
+        conditions._unsubscribe = plant.events.subscribe(delivery.put, kinds=("alarm",))
+        conditions._task = asyncio.get_running_loop().create_task(delivery.run(), name="opcua-conditions")
         return conditions
 
     async def stop(self) -> None:
@@ -167,34 +175,6 @@ class AlarmConditions:
             event.SourceNode, event.SourceName, event.Severity = _SERVER, "Server", 1
             event.Message = ua.LocalizedText("ConditionRefresh")
             event.LocalTime = ua.TimeZoneDataType()
-
-    # -- events ---------------------------------------------------------------------------
-
-    def _on_event(self, event: Event) -> None:
-        self._queue.append(event)  # published inside a scan: triggering waits for the drain task
-        self._wake.set()
-
-    async def _drain(self) -> None:
-        while True:
-            await self._wake.wait()
-            self._wake.clear()
-            while self._queue:
-                event = self._queue.popleft()
-                try:
-                    await self._publish(event)
-                except Exception:  # one bad event must not end the alarm events of the server
-                    log.exception("OPC UA: cannot publish the alarm event of %s", event.source)
-
-    async def _publish(self, event: Event) -> None:
-        condition = self.by_name.get(event.source)
-        if condition is None:
-            return
-        snapshot: AlarmSnapshot = event.data["alarm"]
-        fill(condition, snapshot, event, self.shelve_max)
-        service = self.server.iserver.subscription_service
-        for node in condition.emitting:
-            condition.event.emitting_node = node
-            await service.trigger_event(condition.event)
 
     # -- methods --------------------------------------------------------------------------
 
@@ -279,12 +259,17 @@ class AlarmConditions:
         if monitored_item is not None and monitored_item not in items._monitored_items:
             return ua.StatusCode(ua.StatusCodes.BadMonitoredItemIdInvalid)
         start, end = self._refresh_events
+        delivery = self.delivery
+        assert delivery is not None
         await self._send_marker(items, start, monitored_item)
+        targets = list(delivery.targets_of(subscription, monitored_item))
         for condition in list(self.by_name.values()):
-            if condition.retained:
-                for node in condition.emitting:
-                    condition.event.emitting_node = node
-                    await items.trigger_event(condition.event, monitored_item)
+            if condition.retained and condition.latest is not None:
+                fill(condition, self.shelve_max)
+                for node, target in targets:
+                    if node in condition.emitting:
+                        condition.event.emitting_node = node
+                        await delivery.offer(condition, target)
         await self._send_marker(items, end, monitored_item)
         return []
 
