@@ -16,7 +16,7 @@ from typing import Any
 
 from asyncua import Client, ua
 
-from softplc.adapters import build_adapters
+from softplc.app.adapters import build_adapters
 from softplc.core.clock import SimClock
 from softplc.config import load_config
 from softplc.adapters.opcua import OpcUaServer, OpcUaSettings
