@@ -9,7 +9,7 @@ their reason or comment. Who may do what is not checked here but by the command 
 from __future__ import annotations
 
 from softplc.adapters.alarms.engine import Alarm, AlarmEngine
-from softplc.adapters.alarms.model import (
+from softplc.core.alarms import (
     AlarmRefused, AlarmSnapshot, NothingToAcknowledge, NotShelved, ServiceUnchanged, Shelving, ShelveKind, ShelvingTimeOutOfRange, Transition,
     Trigger, next_state,
 )

@@ -27,7 +27,7 @@ from typing import Any
 from softplc.adapters.alarms.actions import AlarmActions
 from softplc.adapters.alarms.engine import AlarmEngine
 from softplc.adapters.alarms.journal import AlarmJournal, JournalQuery
-from softplc.adapters.alarms.model import AlarmState, Priority
+from softplc.core.alarms import AlarmState, Priority
 from softplc.core.clock import Clock
 from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.util.durations import parse_duration

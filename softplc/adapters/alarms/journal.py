@@ -33,7 +33,7 @@ class JournalEntry:
     time: float  # wall-clock seconds of the runtime clock (simulated time under --sim)
     plant: str
     alarm: str
-    transition: str  # softplc.adapters.alarms.model.Transition values
+    transition: str  # softplc.core.alarms.Transition values
     state: str  # the state after it
     previous: str
     priority: str

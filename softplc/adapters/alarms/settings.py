@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from softplc.adapters.alarms.messages import FIELDS, MessageError, placeholders
-from softplc.adapters.alarms.model import Priority
+from softplc.core.alarms import Priority
 from softplc.adapters.alarms.schema import KINDS, LEVELS
 from softplc.config.plant import PlantConfig
 from softplc.core.datatypes import TypeMismatch

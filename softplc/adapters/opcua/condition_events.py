@@ -17,7 +17,7 @@ from typing import Any
 from asyncua import ua
 from asyncua.server.address_space import AttributeValue, NodeData
 
-from softplc.adapters.alarms.model import AlarmSnapshot, AlarmState, ShelveKind
+from softplc.core.alarms import AlarmSnapshot, AlarmState, ShelveKind
 from softplc.core.events import Event
 
 _I = ua.ObjectIds

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 from asyncua import Server, ua
 from asyncua.common import event_objects
 
-from softplc.adapters.alarms.model import NothingToAcknowledge, NotShelved, ServiceUnchanged, ShelvingTimeOutOfRange, UnknownAlarm
+from softplc.core.alarms import NothingToAcknowledge, NotShelved, ServiceUnchanged, ShelvingTimeOutOfRange, UnknownAlarm
 from softplc.core.events import Event
 from softplc.adapters.opcua.commands import call_command, current_origin, current_session_id, install_caller_context
 from softplc.adapters.opcua.condition_delivery import ConditionDelivery

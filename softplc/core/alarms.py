@@ -1,7 +1,8 @@
 """The alarm model: ISA-18.2 states, the table of their transitions, and what adapters see of an alarm.
 
-Plain data and pure functions only — the OPC UA server, the HMI and the CLI import this module,
-never the engine. An alarm's *annunciation* follows ISA-18.2 (figure 5 of the standard):
+Plain data and pure functions only, in the core: the alarm engine (softplc/adapters/alarms) and
+every adapter that shows alarms (OPC UA conditions, the HMI, the CLI) share this vocabulary; none
+of them imports the engine. An alarm's *annunciation* follows ISA-18.2 (figure 5 of the standard):
 
     NORMAL ──activate──▶ UNACKNOWLEDGED ──acknowledge──▶ ACKNOWLEDGED
        ▲                      │ clear                         │ clear

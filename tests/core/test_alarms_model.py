@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from softplc.adapters.alarms.model import AlarmState, Trigger, effective_state, next_state, released_state
+from softplc.core.alarms import AlarmState, Trigger, effective_state, next_state, released_state
 
 N, U, A, R, L = (AlarmState.NORMAL, AlarmState.UNACKNOWLEDGED, AlarmState.ACKNOWLEDGED, AlarmState.RETURNED, AlarmState.LATCHED)
 ACT, REALARM, CLEAR, ACK = Trigger.ACTIVATE, Trigger.REALARM, Trigger.CLEAR, Trigger.ACKNOWLEDGE
