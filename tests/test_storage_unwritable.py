@@ -54,8 +54,7 @@ def test_text_that_no_store_can_encode_is_stored_escaped_and_the_rows_behind_it_
         writer.put("audit", [WriteEvent(T0 + 1, ALICE, "note", "idle", NOT_UTF8, Rule.TYPE_MISMATCH, "not text"),
                              WriteEvent(T0 + 2, ALICE, "note", "idle", "fine", None, "")])
         writer.put(TABLE, [journal_entry(1, f"operator wrote {NOT_UTF8}"), journal_entry(2, "nul\x00inside")])
-        writer.put(SINK_NAME, [("note", T0 + 1, f"a{NOT_UTF8}b", Quality.GOOD), ("level", T0 + 1, 1.5, Quality.GOOD),
-                               ("note", T0 + 2, "plain", Quality.GOOD)])
+        writer.put(SINK_NAME, [("note", T0 + 1, f"a{NOT_UTF8}b", 0), ("level", T0 + 1, 1.5, 0), ("note", T0 + 2, "plain", 0)])
         assert writer.flush(timeout=20), writer.stats.last_error
         assert writer.stats.pending == 0 and writer.stats.set_aside == 0 and writer.stats.escaped >= 3
         audit = sorted(search(database, AuditQuery(), "p"), key=lambda entry: entry.time)
@@ -102,7 +101,7 @@ def test_escaping_keeps_what_can_be_written_and_rebuilds_only_what_changed() -> 
     event = WriteEvent(T0, ALICE, "note", "idle", {"list": [NOT_UTF8]}, None, "")
     clean = escaped(event)
     assert clean is not event and clean.new == {"list": ["\\xff\\xfe"]} and clean.origin is event.origin
-    unchanged = ("level", T0, 1.5, Quality.GOOD)
+    unchanged = ("level", T0, 1.5, Quality.GOOD)  # any object that holds no string comes back as it is
     assert escaped(unchanged) is unchanged
     assert dataclasses.replace(journal_entry(1)) == escaped(journal_entry(1))
 

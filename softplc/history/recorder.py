@@ -19,9 +19,11 @@ from typing import TYPE_CHECKING, Any
 from softplc.history.commands import register_history_commands
 from softplc.history.queries import HistoryReader
 from softplc.history.settings import HistorySettings, TagPolicy
+from softplc.history.columns import QUALITY_CODES
 from softplc.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.history.swinging_door import SwingingDoor
 from softplc.realtime import shorten_switch_interval
+from softplc.scan_gate import ScanGate
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.tags import Quality, Tag
 
@@ -30,14 +32,17 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-Row = tuple[str, float, Any, Quality]
+# A row to store: (tag name, time, value, quality code: 0 good, 1 uncertain, 2 bad). Only atomic values,
+# so the collector stops tracking the tuple at its first pass: rows queued for a flush period never
+# reach the older generations, whose collections would otherwise hold the event loop for milliseconds.
+Row = tuple[str, float, Any, int]
 HEARTBEAT_TICK = 1.0  # s of runtime clock between two heartbeat checks
 
 
 class TagFilter:
     """Decides which values of one tag are stored (deadband, then compression)."""
 
-    __slots__ = ("name", "deadband", "door", "numeric", "last", "quality")
+    __slots__ = ("name", "deadband", "door", "numeric", "last", "quality", "code")
 
     def __init__(self, name: str, policy: TagPolicy, numeric: bool) -> None:
         self.name = name
@@ -46,48 +51,52 @@ class TagFilter:
         self.numeric = numeric
         self.last: Any = None  # the last value passed on (deadband reference)
         self.quality: Quality | None = None
+        self.code = 0  # the quality's code in rows
 
     def offer(self, when: float, value: Any, quality: Quality) -> list[Row]:
         """The rows to store for a new value of the tag."""
         name = self.name
         if quality is not self.quality or self.last is None:
             rows: list[Row] = []
+            code = QUALITY_CODES[quality]
             door = self.door
             if door is not None:
-                rows = [(name, t, v, self.quality or quality) for t, v in door.release()]
+                held = self.code if self.quality is not None else code
+                rows = [(name, t, v, held) for t, v in door.release()]
                 door.restart()
                 if quality is not Quality.BAD:
                     door.offer(when, value)
-            self.last, self.quality = value, quality
-            rows.append((name, when, value, quality))
+            self.last, self.quality, self.code = value, quality, code
+            rows.append((name, when, value, code))
             return rows
         if not self.numeric:
             self.last = value
-            return [(name, when, value, quality)]
+            return [(name, when, value, self.code)]
         if self.deadband and abs(value - self.last) <= self.deadband:
             return []
         self.last = value
         door = self.door
         if door is None or quality is Quality.BAD:
-            return [(name, when, value, quality)]
-        return [(name, t, v, quality) for t, v in door.offer(when, value)]
+            return [(name, when, value, self.code)]
+        code = self.code
+        return [(name, t, v, code) for t, v in door.offer(when, value)]
 
     def heartbeat(self, now: float) -> list[Row]:
         """Store the held value, or repeat the current one, when max_interval has passed."""
         door = self.door
         if door is None or not door.due(now) or self.quality is None:
             return []
-        rows = [(self.name, t, v, self.quality) for t, v in door.release()]
+        rows = [(self.name, t, v, self.code) for t, v in door.release()]
         if not rows and self.quality is not Quality.BAD:
             door.restart()
-            rows = [(self.name, t, v, self.quality) for t, v in door.offer(now, self.last)]
+            rows = [(self.name, t, v, self.code) for t, v in door.offer(now, self.last)]
         return rows
 
     def release(self) -> list[Row]:
         """The held value, stored now (the end of recording)."""
         if self.door is None or self.quality is None:
             return []
-        return [(self.name, t, v, self.quality) for t, v in self.door.release()]
+        return [(self.name, t, v, self.code) for t, v in self.door.release()]
 
 
 class HistoryRecorder:
@@ -110,6 +119,7 @@ class HistoryRecorder:
         self._runtime: Runtime | None = None
         self._reader: HistoryReader | None = None
         self._unregister: Any = None
+        self._sink: HistorySink | None = None
 
     async def start(self, runtime: Runtime) -> None:
         from softplc.runtime import AdapterError
@@ -125,11 +135,14 @@ class HistoryRecorder:
             except OSError as error:
                 raise AdapterError(f"history: cannot open SQLite {self.storage.path}: {error}") from None
         infos = [TagInfo(name, kind, unit, self.policies[name].stepped) for name, (kind, unit) in self.types.items()]
-        sink = HistorySink(self.plant, infos, partition=self.settings.partition, retention=self.settings.retention)
+        # On the real clock the writer steps aside while a scan cycle is due (softplc/scan_gate.py).
+        gate = ScanGate(runtime.engine, runtime.clock) if not simulated and runtime.tasks else None
+        self._sink = sink = HistorySink(self.plant, infos, partition=self.settings.partition, retention=self.settings.retention,
+                                        steps=gate.stepping if gate is not None else None, step_budget=self.storage.flush_period / 4)
         database = Database(self.storage)
         writer = BatchWriter(database, name="softplc-history-writer")
         writer.register(sink)
-        shorten_switch_interval()  # the writer thread builds rows in Python between its SQL calls
+        shorten_switch_interval()  # the writer thread holds the interpreter lock between its SQL calls
         error = await runtime.clock.run_blocking(writer.start)
         if error is not None:
             if not database.postgresql:
@@ -165,6 +178,8 @@ class HistoryRecorder:
         for tag_filter in self.filters.values():
             rows += tag_filter.release()
         writer.put(SINK_NAME, rows)
+        if self._sink is not None:
+            self._sink.stepping = False  # the scan has stopped (adapters stop after it): write the rest at once
         assert self._runtime is not None
         await self._runtime.clock.run_blocking(writer.stop)
         self.writer = None
