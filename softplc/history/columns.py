@@ -1,13 +1,12 @@
 """A batch of history rows as numpy columns, and their min/max cells: the writer's per-value work done in C.
 
 The recorder queues rows `(tag name, time, value, quality code)` on the event loop (a tuple each:
-the cheapest thing to build there; `QUALITY_CODES`: 0 good, 1 uncertain, 2 bad). The writer thread turns a batch of them into columns with a
-handful of C calls per part (`to_columns`: no Python code runs per value), sorts them by tag and
-time (SQLite then inserts into its (tag, time) index in runs: ~40 % cheaper than interleaved),
-reduces them into the per-10 s, per-minute and per-hour min/max cells with sorts instead of a
-dictionary per value (`Cells`), and hands the driver its parameters as iterators over lists.
-Parts are small (`PART` rows), so no C call holds the interpreter lock for long and the writer
-can step aside between parts while a scan cycle is due (softplc/scan_gate.py).
+the cheapest thing to build there; `QUALITY_CODES`: 0 good, 1 uncertain, 2 bad). The writer turns
+a batch of them into columns with a handful of C calls (`to_columns`: no Python code runs per
+value), sorts them by tag and time (SQLite then inserts into its (tag, time) index in runs: ~40 %
+cheaper than interleaved), reduces them into the per-10 s, per-minute and per-hour min/max cells
+with sorts instead of a dictionary per value (`Cells`), and hands the driver its parameters as
+iterators over lists — or, for PostgreSQL, binary COPY data laid out by numpy (`copy_binary`).
 """
 
 from __future__ import annotations
@@ -15,14 +14,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from itertools import chain, repeat
+from itertools import repeat
 from typing import Any
 
 import numpy as np
 
 from softplc.tags import Quality
 
-PART = 256  # rows converted or handed to the driver between two steps: well under a millisecond
 QUALITY_CODES = {Quality.GOOD: 0, Quality.UNCERTAIN: 1, Quality.BAD: 2}
 BAD = QUALITY_CODES[Quality.BAD]
 
@@ -58,23 +56,16 @@ class Columns:
             texts = {int(position[index]): text for index, text in self.texts.items() if mask[index]}
         return Columns(self.tags[mask], self.times[mask], self.numbers[mask], self.codes[mask], texts)
 
-    def parameters(self, step: Callable[[], None]) -> Iterator[tuple[Any, ...]]:
-        """(tag, time, value, text, quality) per row for the driver — NULL for text and NaN values — calling `step` between parts."""
-        return chain.from_iterable(self._part(first, step) for first in range(0, len(self), PART))
-
-    def _part(self, first: int, step: Callable[[], None]) -> Iterator[tuple[Any, ...]]:
-        step()
-        last = first + PART
-        numbers = self.numbers[first:last]
+    def parameters(self) -> Iterator[tuple[Any, ...]]:
+        """(tag, time, value, text, quality) per row for the driver — NULL for text and NaN values."""
+        numbers = self.numbers
         values = numbers.tolist()
         for index in np.flatnonzero(numbers != numbers).tolist():  # NaN (and text): NULL, as SQLite would store NaN anyway
             values[index] = None
         texts: list[Any] = [None] * len(values)
-        if self.texts:
-            for index, text in self.texts.items():
-                if first <= index < last:
-                    texts[index - first] = text
-        return zip(self.tags[first:last].tolist(), self.times[first:last].tolist(), values, texts, self.codes[first:last].tolist())
+        for index, text in self.texts.items():
+            texts[index] = text
+        return zip(self.tags.tolist(), self.times.tolist(), values, texts, self.codes.tolist())
 
 
 # PostgreSQL's binary COPY (https://www.postgresql.org/docs/current/sql-copy.html#id-1.9.3.55.9.4): a
@@ -88,27 +79,24 @@ _NUMBER_ROW = np.dtype([("fields", ">i2"), ("tag_length", ">i4"), ("tag", ">i4")
                         ("quality", ">i2")])
 
 
-def copy_binary(samples: Columns, step: Callable[[], None]) -> Iterator[bytes]:
-    """The samples as PostgreSQL binary COPY data (header and trailer included), a part at a time with `step` between parts."""
+def copy_binary(samples: Columns) -> Iterator[bytes]:
+    """The samples as PostgreSQL binary COPY data, header and trailer included."""
     yield COPY_HEADER
-    for first in range(0, len(samples), PART):
-        step()
-        last = min(first + PART, len(samples))
-        numbers = samples.numbers[first:last]
-        plain = numbers == numbers  # not NaN: text rows are NaN too
-        rows = np.zeros(last - first, dtype=_NUMBER_ROW)
-        rows["fields"], rows["tag_length"], rows["time_length"], rows["value_length"] = 5, 4, 8, 8
-        rows["text_length"], rows["quality_length"] = -1, 2
-        rows["tag"], rows["time"], rows["value"], rows["quality"] = samples.tags[first:last], samples.times[first:last], numbers, samples.codes[first:last]
-        if plain.all():
-            yield rows.tobytes()
-            continue
-        for index in range(last - first):  # a part with text or NaN: the rows with a variable size one by one
-            if plain[index]:
-                yield rows[index].tobytes()
-            else:
-                yield _copy_row(int(samples.tags[first + index]), float(samples.times[first + index]),
-                                samples.texts.get(first + index), int(samples.codes[first + index]))
+    numbers = samples.numbers
+    plain = numbers == numbers  # not NaN: text rows are NaN too
+    rows = np.zeros(len(samples), dtype=_NUMBER_ROW)
+    rows["fields"], rows["tag_length"], rows["time_length"], rows["value_length"] = 5, 4, 8, 8
+    rows["text_length"], rows["quality_length"] = -1, 2
+    rows["tag"], rows["time"], rows["value"], rows["quality"] = samples.tags, samples.times, numbers, samples.codes
+    if plain.all():
+        yield rows.tobytes()
+    else:
+        first = 0
+        for index in np.flatnonzero(~plain).tolist():  # rows with a variable size (NULL value, text) one by one
+            yield rows[first:index].tobytes()
+            yield _copy_row(int(samples.tags[index]), float(samples.times[index]), samples.texts.get(index), int(samples.codes[index]))
+            first = index + 1
+        yield rows[first:].tobytes()
     yield COPY_TRAILER
 
 
@@ -120,25 +108,11 @@ def _copy_row(tag: int, when: float, text: str | None, code: int) -> bytes:
     return head + body + (2).to_bytes(4, "big") + code.to_bytes(2, "big", signed=True)
 
 
-def to_columns(rows: Sequence[tuple[str, float, Any, int]], ids: Mapping[str, int], step: Callable[[], None],
-               register: Callable[[Collection[str]], None]) -> Columns:
-    """Columns of queued rows, converted `PART` rows at a time with `step` between parts; `register(names)` adds unknown names to `ids`."""
-    parts = []
-    for first in range(0, len(rows), PART):
-        step()
-        parts.append(_part_columns(rows[first:first + PART], ids, first, register))
-    if not parts:
-        return Columns(np.empty(0, np.int64), np.empty(0), np.empty(0), np.empty(0, np.int8), {})
-    texts: dict[int, str] = {}
-    for part in parts:
-        texts.update(part.texts)
-    return Columns(np.concatenate([part.tags for part in parts]), np.concatenate([part.times for part in parts]),
-                   np.concatenate([part.numbers for part in parts]), np.concatenate([part.codes for part in parts]), texts)
-
-
-def _part_columns(rows: Sequence[tuple[str, float, Any, int]], ids: Mapping[str, int], offset: int,
-                  register: Callable[[Collection[str]], None]) -> Columns:
+def to_columns(rows: Sequence[tuple[str, float, Any, int]], ids: Mapping[str, int], register: Callable[[Collection[str]], None]) -> Columns:
+    """Columns of queued rows; `register(names)` adds the names `ids` lacks to it first."""
     count = len(rows)
+    if not count:
+        return Columns(np.empty(0, np.int64), np.empty(0), np.empty(0), np.empty(0, np.int8), {})
     names, times, values, codes = zip(*rows)
     unknown = set(names).difference(ids)
     if unknown:
@@ -148,7 +122,7 @@ def _part_columns(rows: Sequence[tuple[str, float, Any, int]], ids: Mapping[str,
     texts: dict[int, str] = {}
     if is_text.any():
         positions = np.flatnonzero(is_text).tolist()
-        texts = {offset + index: values[index] for index in positions}
+        texts = {index: values[index] for index in positions}
         objects = np.array(values, dtype=object)
         objects[positions] = math.nan
         numbers = objects.astype(np.float64)
@@ -198,13 +172,9 @@ class Cells:
         mask = (self.cells >= start) & (self.cells < stop)
         return Cells(*(column[mask] for column in self._columns()))
 
-    def parameters(self, step: Callable[[], None]) -> Iterator[tuple[Any, ...]]:
-        """(tag, cell, count, vmin, tmin, vmax, tmax) per cell for the driver, calling `step` between parts."""
-        return chain.from_iterable(self._part(first, step) for first in range(0, len(self.tags), PART))
-
-    def _part(self, first: int, step: Callable[[], None]) -> Iterator[tuple[Any, ...]]:
-        step()
-        return zip(*(column[first:first + PART].tolist() for column in self._columns()))
+    def parameters(self) -> Iterator[tuple[Any, ...]]:
+        """(tag, cell, count, vmin, tmin, vmax, tmax) per cell for the driver."""
+        return zip(*(column.tolist() for column in self._columns()))
 
     def _columns(self) -> tuple[np.ndarray, ...]:
         return (self.tags, self.cells, self.counts, self.minimum, self.minimum_time, self.maximum, self.maximum_time)

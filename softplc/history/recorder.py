@@ -1,11 +1,12 @@
-"""The historian adapter: listens to tag changes, filters them, hands the rows to the writer thread.
+"""The historian adapter: listens to tag changes, filters them, hands the rows to the store's writer.
 
 Each recorded tag has a `TagFilter`: an exception deadband (a value is kept only when it moved
 more than the deadband since the last kept one), then swinging-door compression when the rule
 asks for it. A quality change is always recorded (the held value first, so the shape is kept).
-Filtering runs on the event loop inside the change notification (a few microseconds a value);
-the SQL runs on the store's one writer thread. Timestamps are the tags' own (the runtime clock's
-wall time: simulated under --sim).
+Filtering runs on the event loop inside the change notification (under a microsecond a value);
+the rows go to the writer, which runs in a process of its own on the real clock
+(softplc/storage/process.py) and in a thread under --sim. Timestamps are the tags' own (the
+runtime clock's wall time: simulated under --sim).
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ from softplc.history.columns import QUALITY_CODES
 from softplc.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.history.swinging_door import SwingingDoor
 from softplc.realtime import shorten_switch_interval
-from softplc.scan_gate import ScanGate
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
+from softplc.storage.process import ProcessWriter
 from softplc.tags import Quality, Tag
 
 if TYPE_CHECKING:
@@ -111,7 +112,7 @@ class HistoryRecorder:
         self.policies = policies
         self.types = types
         self.storage: StorageSettings | None = None
-        self.writer: BatchWriter | None = None
+        self.writer: BatchWriter | ProcessWriter | None = None
         self.filters: dict[str, TagFilter] = {}
         self._unsubscribe: Any = None
         self._due: list[tuple[float, str]] = []  # heartbeat deadlines (runtime wall time), a heap
@@ -119,7 +120,6 @@ class HistoryRecorder:
         self._runtime: Runtime | None = None
         self._reader: HistoryReader | None = None
         self._unregister: Any = None
-        self._sink: HistorySink | None = None
 
     async def start(self, runtime: Runtime) -> None:
         from softplc.runtime import AdapterError
@@ -135,14 +135,18 @@ class HistoryRecorder:
             except OSError as error:
                 raise AdapterError(f"history: cannot open SQLite {self.storage.path}: {error}") from None
         infos = [TagInfo(name, kind, unit, self.policies[name].stepped) for name, (kind, unit) in self.types.items()]
-        # On the real clock the writer steps aside while a scan cycle is due (softplc/scan_gate.py).
-        gate = ScanGate(runtime.engine, runtime.clock) if not simulated and runtime.tasks else None
-        self._sink = sink = HistorySink(self.plant, infos, partition=self.settings.partition, retention=self.settings.retention,
-                                        steps=gate.stepping if gate is not None else None, step_budget=self.storage.flush_period / 4)
+        sink = HistorySink(self.plant, infos, partition=self.settings.partition, retention=self.settings.retention)
         database = Database(self.storage)
-        writer = BatchWriter(database, name="softplc-history-writer")
+        writer: BatchWriter | ProcessWriter
+        if simulated:
+            # On the simulated clock no cycle can be late: a thread, no process to start.
+            writer = BatchWriter(database, name="softplc-history-writer")
+            shorten_switch_interval()  # the writer thread holds the interpreter lock between its SQL calls
+        else:
+            # On the real clock the writer runs in a process of its own: a thread would hold the event
+            # loop's interpreter lock now and then, and keep it while the machine preempts it.
+            writer = ProcessWriter(database, name="softplc-history-writer")
         writer.register(sink)
-        shorten_switch_interval()  # the writer thread holds the interpreter lock between its SQL calls
         error = await runtime.clock.run_blocking(writer.start)
         if error is not None:
             if not database.postgresql:
@@ -178,8 +182,6 @@ class HistoryRecorder:
         for tag_filter in self.filters.values():
             rows += tag_filter.release()
         writer.put(SINK_NAME, rows)
-        if self._sink is not None:
-            self._sink.stepping = False  # the scan has stopped (adapters stop after it): write the rest at once
         assert self._runtime is not None
         await self._runtime.clock.run_blocking(writer.stop)
         self.writer = None

@@ -19,12 +19,9 @@ no DELETE of rows.
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
-import time
-from collections.abc import Callable, Collection, Iterable, Iterator
-from contextlib import AbstractContextManager
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -80,8 +77,7 @@ class HistorySink:
 
     name = SINK_NAME
 
-    def __init__(self, plant: str, tags: Iterable[TagInfo], *, partition: float = DEFAULT_PARTITION, retention: float | None = None,
-                 steps: Callable[[], AbstractContextManager[Callable[[], None]]] | None = None, step_budget: float = 0.5) -> None:
+    def __init__(self, plant: str, tags: Iterable[TagInfo], *, partition: float = DEFAULT_PARTITION, retention: float | None = None) -> None:
         self.plant = plant
         self.tags = {info.name: info for info in tags}
         self.partition = partition
@@ -89,13 +85,6 @@ class HistorySink:
         self.latest = -math.inf  # newest sample time written: retention counts back from it (sim time under --sim)
         self._ids: dict[str, int] = {}
         self._partitions: set[float] = set()
-        # `steps()` yields a step() to call between parts of a batch: a ScanGate's (softplc/scan_gate.py) waits
-        # there while a scan cycle is due, so the writer never holds the interpreter lock when one starts.
-        self._steps = steps or _no_steps
-        self.stepping = steps is not None  # cleared when the scan stops: no cycle would come to wait for
-        # A batch steps aside for at most this long (s): on a machine so busy that a cycle is always due,
-        # the writer must still keep up (it would fall behind and, at last, drop rows).
-        self.step_budget = step_budget
 
     # -- Sink -----------------------------------------------------------------------------
 
@@ -106,29 +95,26 @@ class HistorySink:
         self._register(connection, database, list(self.tags.values()))
 
     def write(self, connection: Any, database: Database, rows: list[Any]) -> None:
-        with self._steps() as gate_step:
-            step = _budgeted(gate_step, self.step_budget) if self.stepping else _no_step
-            columns = to_columns(rows, self._ids, step, lambda names: self._register_names(connection, database, names))
-            if not len(columns):
-                return
-            self.latest = max(self.latest, float(columns.times.max()))
-            columns = columns.sorted()  # the index's order: SQLite inserts in runs
-            step()
-            # 10 s cells from the samples, minutes from those, hours from those
-            levels = [(LEVELS[0][0], Cells.of_samples(columns, LEVELS[0][1]))]
-            for suffix, width in LEVELS[1:]:
-                levels.append((suffix, levels[-1][1].coarser(width)))
-            size = self.partition
-            starts = np.floor(columns.times / size) * size
-            partitions = np.unique(starts).tolist()
-            for start in partitions:
-                table = self._partition(connection, database, start)
-                samples = columns if len(partitions) == 1 else columns.select(starts == start)
-                _insert_samples(connection, database, table, samples, step)
-                for suffix, cells in levels:
-                    inside = cells if len(partitions) == 1 else cells.within(start, start + size)
-                    if len(inside):
-                        _upsert_cells(connection, database, f"{table}_{suffix}", inside.parameters(step))
+        columns = to_columns(rows, self._ids, lambda names: self._register_names(connection, database, names))
+        if not len(columns):
+            return
+        self.latest = max(self.latest, float(columns.times.max()))
+        columns = columns.sorted()  # the index's order: SQLite inserts in runs
+        # 10 s cells from the samples, minutes from those, hours from those
+        levels = [(LEVELS[0][0], Cells.of_samples(columns, LEVELS[0][1]))]
+        for suffix, width in LEVELS[1:]:
+            levels.append((suffix, levels[-1][1].coarser(width)))
+        size = self.partition
+        starts = np.floor(columns.times / size) * size
+        partitions = np.unique(starts).tolist()
+        for start in partitions:
+            table = self._partition(connection, database, start)
+            samples = columns if len(partitions) == 1 else columns.select(starts == start)
+            _insert_samples(connection, database, table, samples)
+            for suffix, cells in levels:
+                inside = cells if len(partitions) == 1 else cells.within(start, start + size)
+                if len(inside):
+                    _upsert_cells(connection, database, f"{table}_{suffix}", inside.parameters())
 
     def maintain(self, connection: Any, database: Database) -> None:
         if self.retention is None or self.latest == -math.inf:
@@ -169,38 +155,15 @@ def _create_partition(cursor: Any, name: str) -> None:
                        "vmax DOUBLE PRECISION NOT NULL, tmax DOUBLE PRECISION NOT NULL, PRIMARY KEY (tag, cell))")
 
 
-def _insert_samples(connection: Any, database: Database, table: str, samples: Columns, step: Callable[[], None]) -> None:
-    """The raw samples into a partition: one executemany on SQLite, one COPY on PostgreSQL."""
+def _insert_samples(connection: Any, database: Database, table: str, samples: Columns) -> None:
+    """The raw samples into a partition: one executemany on SQLite, one binary COPY on PostgreSQL."""
     cursor = connection.cursor()
     if database.postgresql:
         with cursor.copy(f"COPY {table} ({', '.join(SAMPLE_COLUMNS)}) FROM STDIN (FORMAT BINARY)") as copy:
-            for data in copy_binary(samples, step):
+            for data in copy_binary(samples):
                 copy.write(data)
     else:
-        cursor.executemany(f"INSERT INTO {table} ({', '.join(SAMPLE_COLUMNS)}) VALUES (?, ?, ?, ?, ?)", samples.parameters(step))
-
-
-def _no_step() -> None:
-    pass
-
-
-def _budgeted(step: Callable[[], None], budget: float) -> Callable[[], None]:
-    """`step`, until the steps have taken `budget` seconds in all; then nothing."""
-    spent = 0.0
-
-    def budgeted() -> None:
-        nonlocal spent
-        if spent < budget:
-            started = time.monotonic()
-            step()
-            spent += time.monotonic() - started
-
-    return budgeted
-
-
-@contextlib.contextmanager
-def _no_steps() -> Iterator[Callable[[], None]]:
-    yield _no_step
+        cursor.executemany(f"INSERT INTO {table} ({', '.join(SAMPLE_COLUMNS)}) VALUES (?, ?, ?, ?, ?)", samples.parameters())
 
 
 def _upsert_cells(connection: Any, database: Database, table: str, cells: Iterable[tuple[Any, ...]]) -> None:

@@ -13,6 +13,7 @@ a row that still cannot be written is set aside and reported, the rows around it
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections import deque
@@ -158,6 +159,7 @@ class BatchWriter:
     # -- the writer thread ------------------------------------------------------------------
 
     def _run(self) -> None:
+        normal_priority()
         last_maintain = time.monotonic()
         try:
             self._open()
@@ -363,6 +365,16 @@ class BatchWriter:
             kept = "keeping" if self.stats.dropped == 0 else "dropping the oldest beyond"
             log.error("%s: cannot write to %s: %s (%s %d queued rows, retrying every %.3g s)",
                       self.name, self.database.describe(), self.stats.last_error, kept, self.stats.pending, self.flush_period)
+
+
+def normal_priority() -> None:
+    """Run this thread under the normal policy even if it inherited the loop's SCHED_FIFO (`softplc run --rt-priority`)."""
+    # A writer at real-time priority would take a CPU from everything else for as long as it has rows to write.
+    if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR):
+        try:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:
+            pass
 
 
 def _reason(error: BaseException) -> str:
