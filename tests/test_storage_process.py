@@ -99,3 +99,23 @@ def test_an_unreachable_server_is_reported_at_start_and_rows_wait(tmp_path) -> N
         wait_for(lambda: process.stats.pending == 4 and process.stats.errors >= 1)
     finally:
         process.stop(timeout=5)
+
+
+def test_rows_a_dying_child_held_are_counted_as_dropped(tmp_path, caplog) -> None:
+    caplog.set_level(logging.ERROR, logger="softplc.storage.process")
+    process = ProcessWriter(Database(StorageSettings.sqlite(tmp_path / "h.sqlite")), name="held", flush_period=30.0)
+    process.register(HistorySink("p", [TagInfo("level", "float64")]))
+    assert process.start() is None
+    try:
+        process.put(SINK_NAME, rows(0, 10))
+        wait_for(lambda: process._child.get("pending") == 10)  # the child has them, and commits only in 30 s
+        held = process._process
+        assert held is not None
+        os.kill(held.pid, signal.SIGKILL)
+        wait_for(lambda: process.stats.dropped == 10)
+        assert any("holding 10 rows, which are lost" in record.getMessage() for record in caplog.records)
+        process.put(SINK_NAME, rows(10, 3))
+        assert process.flush(timeout=30)  # to the child that replaced it
+        assert stored(process.database) == [10.0, 11.0, 12.0] and process.stats.pending == 0
+    finally:
+        process.stop()

@@ -45,6 +45,7 @@ log = logging.getLogger(__name__)
 FRAME = struct.Struct(">I")
 RESTART_DELAY = 1.0  # s between two starts of a child
 STATS_PERIOD = 0.1  # s: how often the child reports its statistics (when they changed)
+STOP = -1  # the outbox's mark of the stop request
 COUNTERS = ("rows_written", "transactions", "errors", "dropped", "escaped", "set_aside", "reconnections")
 
 
@@ -78,7 +79,7 @@ class ProcessWriter:
         self.stats = WriterStats()
         self._sinks: list[Sink] = []
         self._lock = threading.Condition()
-        self._outbox: deque[tuple[bytes, int, str]] = deque()  # frames not sent yet: (frame, rows in it, kind)
+        self._outbox: deque[tuple[bytes, int, int]] = deque()  # frames not sent yet: (frame, rows in it, flush request or 0)
         self._waiting_rows = 0  # rows in the outbox
         self._put = 0  # rows ever put
         self._sent = 0  # rows sent to the current child
@@ -87,6 +88,7 @@ class ProcessWriter:
         self._lost = 0  # rows dropped here: the outbox overflowed, or a child died holding them
         self._replies: dict[int, bool] = {}
         self._requests = 0
+        self._asked: set[int] = set()  # flush requests the current child has received and not answered
         self._process: subprocess.Popen[bytes] | None = None
         self._stopping = False
         self._wake = threading.Event()
@@ -110,11 +112,11 @@ class ProcessWriter:
 
     def put(self, sink: str, rows: list[Any]) -> None:
         """Queue rows for `sink`: pickled here, sent by the sender thread."""
-        if not rows:
+        if not rows or self._stopping:
             return
         frame = _frame(("rows", sink, rows))
         with self._lock:
-            self._outbox.append((frame, len(rows), "rows"))
+            self._outbox.append((frame, len(rows), 0))
             self._waiting_rows += len(rows)
             self._put += len(rows)
             if self._waiting_rows > self.max_pending:
@@ -129,7 +131,7 @@ class ProcessWriter:
         with self._lock:
             self._requests += 1
             request = self._requests
-            self._outbox.append((_frame(("flush", request, maintain, timeout)), 0, "flush"))
+            self._outbox.append((_frame(("flush", request, maintain, timeout)), 0, request))
         self._threads()
         self._wake.set()
         with self._lock:
@@ -146,7 +148,7 @@ class ProcessWriter:
             return
         with self._lock:
             self._stopping = True
-            self._outbox.append((_frame(("stop",)), 0, "stop"))
+            self._outbox.append((_frame(("stop",)), 0, STOP))
         self._threads()
         self._wake.set()
         assert self._sender is not None
@@ -213,6 +215,8 @@ class ProcessWriter:
             if process is None or process.poll() is not None:
                 if self._stopping and not any(count for _, count, _ in self._outbox):
                     return  # nothing left for a child to write
+                if self._reader is not None:
+                    self._reader.join()  # the dead child's figures are accounted for before another starts
                 wait = RESTART_DELAY - (time.monotonic() - self._started_at)
                 if wait > 0:
                     time.sleep(wait)
@@ -225,7 +229,7 @@ class ProcessWriter:
                 with self._lock:
                     if not self._outbox:
                         break
-                    frame, count, kind = self._outbox[0]
+                    frame, count, request = self._outbox[0]
                 try:
                     process.stdin.write(frame)  # blocks while the child's pipe is full, the lock released
                     process.stdin.flush()
@@ -236,7 +240,9 @@ class ProcessWriter:
                         self._outbox.popleft()
                         self._waiting_rows -= count
                         self._sent += count
-                if kind == "stop":
+                        if request > 0:
+                            self._asked.add(request)
+                if request == STOP:
                     _close_quietly(process.stdin)
                     return
 
@@ -252,6 +258,7 @@ class ProcessWriter:
             elif kind == "flushed":
                 with self._lock:
                     self._replies[message[1]] = message[2]
+                    self._asked.discard(message[1])
                     self._lock.notify_all()
             elif kind == "log":
                 _log(message)
@@ -265,8 +272,9 @@ class ProcessWriter:
             self._child, self._sent = {}, 0
             self._lost += held
             stopping = self._stopping
-            for request in [r for r in range(1, self._requests + 1) if r not in self._replies]:
+            for request in self._asked:
                 self._replies[request] = False  # no answer will come from this child
+            self._asked.clear()
             self._update_pending()
             self._lock.notify_all()
         if not stopping or process.returncode != 0:
@@ -276,11 +284,11 @@ class ProcessWriter:
 
     def _drop_oldest(self, count: int) -> None:
         # Called with the lock held: whole frames of rows, the oldest first (flush and stop requests stay).
-        kept: deque[tuple[bytes, int, str]] = deque()
+        kept: deque[tuple[bytes, int, int]] = deque()
         while self._outbox and count > 0:
-            frame, rows, kind = self._outbox.popleft()
-            if kind != "rows":
-                kept.append((frame, rows, kind))
+            frame, rows, request = self._outbox.popleft()
+            if request:
+                kept.append((frame, rows, request))
                 continue
             count -= rows
             self._waiting_rows -= rows
