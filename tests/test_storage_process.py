@@ -1,6 +1,6 @@
 """The writer in a process of its own (softplc/storage/process.py): what a thread does, and it survives its own death.
 
-Real child processes (`python -m softplc.storage.process`) writing real stores; killed with
+Real child processes (`python -m softplc.storage.child`) writing real stores; killed with
 SIGKILL, sent SIGINT as a terminal's Ctrl-C would, on SQLite and PostgreSQL.
 """
 

@@ -18,7 +18,7 @@ The contract (stable; the alarm journal builds on it):
   row fails (`unwritable.py`: text no store can encode, a number too large) is written again
   with its text escaped, and a row that still cannot be written is set aside and reported.
 - `ProcessWriter` (`process.py`) has the same interface and runs a `BatchWriter` in a child
-  process (`python -m softplc.storage.process`), so the runtime's event loop never waits for a
+  process (`python -m softplc.storage.child`), so the runtime's event loop never waits for a
   writer thread's interpreter lock; its sinks are pickled to the child. The historian uses it on
   the real clock.
 - `PartitionCatalogue(prefix, lock_key)` names, lists and drops a store's time partitions (one

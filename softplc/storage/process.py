@@ -6,10 +6,10 @@ machine), the event loop waits until it runs again — even under `softplc run -
 priority inversion no thread priority fixes (measured: a 10 ms task's p99 start latency went from
 0.07 ms to 14.7 ms beside an in-process history writer at load 16, with the loop at SCHED_FIFO).
 `ProcessWriter` has the `BatchWriter` interface (softplc/storage/writer.py) and runs one in a
-child process (`python -m softplc.storage.process`): `put()` only pickles the rows on the caller's
+child process (`python -m softplc.storage.child`): `put()` only pickles the rows on the caller's
 thread (~0.1 µs a row) and queues the bytes; a sender thread writes them to the child's stdin
 (the lock released while it blocks), a reader thread takes the child's statistics, flush
-replies and log lines from its stdout. Frames both ways: a 4-byte big-endian length, a pickle.
+replies and log lines from its stdout (frames both ways: softplc/storage/frames.py).
 
 - Durable as the thread: the child commits once per flush period. When the runtime is killed
   (kill -9) the child reads the end of its input, commits everything it received and exits —
@@ -23,47 +23,27 @@ replies and log lines from its stdout. Frames both ways: a 4-byte big-endian len
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
-import pickle
-import signal
-import struct
 import subprocess
 import sys
 import threading
 import time
 from collections import deque
-from dataclasses import asdict
+from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
 from softplc.storage.database import Database, StorageError
-from softplc.storage.writer import MAINTAIN_PERIOD, BatchWriter, Sink, WriterStats, normal_priority
+from softplc.storage.frames import frame, receive, send
+from softplc.storage.writer import MAINTAIN_PERIOD, Sink, WriterStats, normal_priority
 
 log = logging.getLogger(__name__)
 
-FRAME = struct.Struct(">I")
 RESTART_DELAY = 1.0  # s between two starts of a child
-STATS_PERIOD = 0.1  # s: how often the child reports its statistics (when they changed)
 STOP = -1  # the outbox's mark of the stop request
 COUNTERS = ("rows_written", "transactions", "errors", "dropped", "escaped", "set_aside", "reconnections")
-
-
-def send(stream: IO[bytes], message: Any) -> None:
-    """One frame: length and pickle."""
-    data = pickle.dumps(message, 5)
-    stream.write(FRAME.pack(len(data)) + data)
-    stream.flush()
-
-
-def receive(stream: IO[bytes]) -> Any:
-    """The next frame's message, or None at the end of the stream."""
-    header = stream.read(FRAME.size)
-    if len(header) < FRAME.size:
-        return None
-    (length,) = FRAME.unpack(header)
-    data = stream.read(length)
-    return pickle.loads(data) if len(data) == length else None
 
 
 class ProcessWriter:
@@ -114,9 +94,9 @@ class ProcessWriter:
         """Queue rows for `sink`: pickled here, sent by the sender thread."""
         if not rows or self._stopping:
             return
-        frame = _frame(("rows", sink, rows))
+        data = frame(("rows", sink, rows))
         with self._lock:
-            self._outbox.append((frame, len(rows), 0))
+            self._outbox.append((data, len(rows), 0))
             self._waiting_rows += len(rows)
             self._put += len(rows)
             if self._waiting_rows > self.max_pending:
@@ -131,7 +111,7 @@ class ProcessWriter:
         with self._lock:
             self._requests += 1
             request = self._requests
-            self._outbox.append((_frame(("flush", request, maintain, timeout)), 0, request))
+            self._outbox.append((frame(("flush", request, maintain, timeout)), 0, request))
         self._threads()
         self._wake.set()
         with self._lock:
@@ -148,7 +128,7 @@ class ProcessWriter:
             return
         with self._lock:
             self._stopping = True
-            self._outbox.append((_frame(("stop",)), 0, STOP))
+            self._outbox.append((frame(("stop",)), 0, STOP))
         self._threads()
         self._wake.set()
         assert self._sender is not None
@@ -185,8 +165,9 @@ class ProcessWriter:
         package_root = str(Path(softplc.__file__).resolve().parent.parent)
         environment["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, environment.get("PYTHONPATH")]))
         self._started_at = time.monotonic()
-        process = subprocess.Popen([sys.executable, "-m", "softplc.storage.process"], stdin=subprocess.PIPE,
-                                   stdout=subprocess.PIPE, env=environment)
+        with _normal_scheduling():  # a replacement is started by the sender, which may run at SCHED_FIFO
+            process = subprocess.Popen([sys.executable, "-m", "softplc.storage.child"], stdin=subprocess.PIPE,
+                                       stdout=subprocess.PIPE, env=environment)
         assert process.stdin is not None and process.stdout is not None
         setup = {"settings": self.database.settings, "flush_period": self.flush_period, "name": self.name,
                  "max_pending": self.max_pending, "maintain_period": self.maintain_period, "sinks": self._sinks,
@@ -229,14 +210,14 @@ class ProcessWriter:
                 with self._lock:
                     if not self._outbox:
                         break
-                    frame, count, request = self._outbox[0]
+                    data, count, request = self._outbox[0]
                 try:
-                    process.stdin.write(frame)  # blocks while the child's pipe is full, the lock released
+                    process.stdin.write(data)  # blocks while the child's pipe is full, the lock released
                     process.stdin.flush()
                 except OSError:  # the child died: the reader thread accounts for it, the next turn starts another
                     break
                 with self._lock:
-                    if self._outbox and self._outbox[0][0] is frame:
+                    if self._outbox and self._outbox[0][0] is data:
                         self._outbox.popleft()
                         self._waiting_rows -= count
                         self._sent += count
@@ -286,9 +267,9 @@ class ProcessWriter:
         # Called with the lock held: whole frames of rows, the oldest first (flush and stop requests stay).
         kept: deque[tuple[bytes, int, int]] = deque()
         while self._outbox and count > 0:
-            frame, rows, request = self._outbox.popleft()
+            data, rows, request = self._outbox.popleft()
             if request:
-                kept.append((frame, rows, request))
+                kept.append((data, rows, request))
                 continue
             count -= rows
             self._waiting_rows -= rows
@@ -308,9 +289,22 @@ class ProcessWriter:
         stats.last_commit_seconds = child.get("last_commit_seconds", stats.last_commit_seconds)
 
 
-def _frame(message: Any) -> bytes:
-    data = pickle.dumps(message, 5)
-    return FRAME.pack(len(data)) + data
+@contextlib.contextmanager
+def _normal_scheduling() -> Iterator[None]:
+    """This thread at normal priority meanwhile, so a process it starts does not inherit SCHED_FIFO."""
+    policy = os.sched_getscheduler(0) if hasattr(os, "sched_getscheduler") else None
+    if policy not in (getattr(os, "SCHED_FIFO", None), getattr(os, "SCHED_RR", None)):
+        yield
+        return
+    parameters = os.sched_getparam(0)
+    normal_priority()
+    try:
+        yield
+    finally:
+        try:
+            os.sched_setscheduler(0, policy, parameters)
+        except OSError:
+            pass
 
 
 def _ready_within(stream: IO[bytes], timeout: float) -> tuple[Any, ...] | None:
@@ -342,83 +336,3 @@ def _close_quietly(stream: IO[bytes]) -> None:
         stream.close()
     except OSError:
         pass
-
-
-# -- the child process ----------------------------------------------------------------------
-
-
-class _Forward(logging.Handler):
-    """Sends the child's log records to the runtime's process, which logs them again."""
-
-    def __init__(self, out: _Out) -> None:
-        super().__init__()
-        self.out = out
-
-    def emit(self, record: logging.LogRecord) -> None:
-        arguments = record.args if isinstance(record.args, tuple) else ()
-        plain = tuple(value if isinstance(value, (str, int, float)) else str(value) for value in arguments)
-        self.out.send(("log", record.levelno, record.name, str(record.msg), plain))
-
-
-class _Out:
-    """The child's stdout, shared by its threads."""
-
-    def __init__(self, stream: IO[bytes]) -> None:
-        self.stream = stream
-        self.lock = threading.Lock()
-
-    def send(self, message: Any) -> None:
-        with self.lock:
-            try:
-                send(self.stream, message)
-            except OSError:  # the runtime is gone: nobody reads any more
-                pass
-
-
-def main() -> int:
-    """The child: set up from the first frame, then rows, flushes and stop until the end of stdin."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the runtime stops us (the end of stdin), not the terminal
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    normal_priority()  # started by a thread at SCHED_FIFO (--rt-priority): writing must not take a CPU from the plant
-    source, out = sys.stdin.buffer, _Out(sys.stdout.buffer)
-    sys.stdout = sys.stderr  # nothing else may write into the frames
-    message = receive(source)
-    if not (isinstance(message, tuple) and message[0] == "setup"):
-        return 2
-    setup = message[1]
-    logging.basicConfig(level=setup["level"], handlers=[_Forward(out)], force=True)
-    writer = BatchWriter(Database(setup["settings"]), flush_period=setup["flush_period"], name=setup["name"],
-                         max_pending=setup["max_pending"], maintain_period=setup["maintain_period"])
-    for sink in setup["sinks"]:
-        writer.register(sink)
-    error = writer.start()
-    out.send(("ready", str(error).strip() or type(error).__name__ if error is not None else None))
-    done = threading.Event()
-    reporter = threading.Thread(target=_report, args=(writer, out, done), name="stats", daemon=True)
-    reporter.start()
-    while (message := receive(source)) is not None and message[0] != "stop":
-        if message[0] == "rows":
-            writer.put(message[1], message[2])
-        elif message[0] == "flush":
-            _, request, maintain, timeout = message
-            ok = writer.flush(timeout, maintain=maintain)
-            out.send(("stats", asdict(writer.stats)))
-            out.send(("flushed", request, ok))
-    writer.stop()
-    done.set()
-    reporter.join()
-    out.send(("stats", asdict(writer.stats)))
-    return 0
-
-
-def _report(writer: BatchWriter, out: _Out, done: threading.Event) -> None:
-    last: dict[str, Any] = {}
-    while not done.wait(STATS_PERIOD):
-        figures = asdict(writer.stats)
-        if figures != last:
-            out.send(("stats", figures))
-            last = figures
-
-
-if __name__ == "__main__":
-    sys.exit(main())
