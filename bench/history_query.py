@@ -28,7 +28,6 @@ from bench.timing import load_average  # noqa: E402
 from softplc.adapters.history.queries import HistoryReader  # noqa: E402
 from softplc.adapters.history.store import HistorySink, TagInfo  # noqa: E402
 from softplc.storage import BatchWriter, Database, StorageSettings  # noqa: E402
-from softplc.core.tags import Quality  # noqa: E402
 
 T0 = 1_767_225_600.0
 DAY = 86_400
@@ -45,8 +44,8 @@ def fill(database: Database, days: int) -> float:
     started = time.monotonic()
     for day in range(days):
         base = T0 + day * DAY
-        rows = [("level", base + t, 50 + 40 * math.sin((base + t) / 3600.0), Quality.GOOD) for t in range(DAY)]
-        rows[DAY // 2] = ("level", base + DAY // 2, 150.0, Quality.GOOD)  # a daily one-second spike
+        rows = [("level", base + t, 50 + 40 * math.sin((base + t) / 3600.0), 0) for t in range(DAY)]  # quality code 0: good
+        rows[DAY // 2] = ("level", base + DAY // 2, 150.0, 0)  # a daily one-second spike
         writer.put("history", rows)
         writer.flush(timeout=600)
     writer.stop()

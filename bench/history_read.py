@@ -55,12 +55,11 @@ history: {{flush_period: 1s}}
 def prefill(state: Path) -> None:
     from softplc.adapters.history.store import HistorySink, TagInfo
     from softplc.storage import BatchWriter, Database, StorageSettings
-    from softplc.core.tags import Quality
 
     writer = BatchWriter(Database(StorageSettings.sqlite(state / "history.sqlite")), flush_period=0.1)
     writer.register(HistorySink("reads", [TagInfo("level", "float64")]))
     assert writer.start() is None
-    writer.put("history", [("level", START + t, 50.0 + (t % 600) / 10, Quality.GOOD) for t in range(DAY)])
+    writer.put("history", [("level", START + t, 50.0 + (t % 600) / 10, 0) for t in range(DAY)])  # quality code 0: good
     assert writer.flush(timeout=120)
     writer.stop()
 

@@ -67,12 +67,29 @@ class PostgresServer:
             raise RuntimeError(f"initdb failed: {result.stderr.strip() or result.stdout.strip()}")
         for _ in range(5):  # another process may take the free port before the server does
             self.port = _free_port()
-            options = f"-p {self.port} -k {self.directory} -c listen_addresses=127.0.0.1 -c fsync=off -c max_connections=200"
-            result = self._run(str(self.bin / "pg_ctl"), "-D", str(self.data), "-o", options, "-l", str(self.directory / "log"), "-w", "start")
+            result = self._pg_ctl_start()
             if result.returncode == 0:
                 return
-        log = (self.directory / "log").read_text(errors="replace")[-2000:] if (self.directory / "log").exists() else ""
-        raise RuntimeError(f"pg_ctl start failed: {result.stderr.strip()} {log}")
+        raise RuntimeError(f"pg_ctl start failed: {result.stderr.strip()} {self._log_tail()}")
+
+    def _pg_ctl_start(self) -> subprocess.CompletedProcess[str]:
+        options = f"-p {self.port} -k {self.directory} -c listen_addresses=127.0.0.1 -c fsync=off -c max_connections=200"
+        return self._run(str(self.bin / "pg_ctl"), "-D", str(self.data), "-o", options, "-l", str(self.directory / "log"), "-w", "start")
+
+    def _log_tail(self) -> str:
+        return (self.directory / "log").read_text(errors="replace")[-2000:] if (self.directory / "log").exists() else ""
+
+    def shut_down(self) -> None:
+        """Stop the server as an administrator would (clients' connections are terminated); the data stays."""
+        result = self._run(str(self.bin / "pg_ctl"), "-D", str(self.data), "-m", "fast", "-w", "stop")
+        if result.returncode != 0:
+            raise RuntimeError(f"pg_ctl stop failed: {result.stderr.strip()}")
+
+    def start_again(self) -> None:
+        """Start a server stopped by `shut_down` on the same port."""
+        result = self._pg_ctl_start()
+        if result.returncode != 0:
+            raise RuntimeError(f"pg_ctl start failed: {result.stderr.strip()} {self._log_tail()}")
 
     @property
     def dsn(self) -> str:

@@ -13,8 +13,14 @@ The contract (stable; the alarm journal builds on it):
   `Sink` registered with it creates its tables (`prepare`), and receives the rows `put` for it
   in one transaction per flush period (`write`), then `maintain`s itself (retention) now and then.
   `put()` is cheap and thread-safe (call it on the event loop); `flush()` waits until what was
-  put is committed; `stop()` flushes and closes. A failed transaction keeps its rows for the
-  next flush (bounded by `max_pending`), so a PostgreSQL restart loses nothing.
+  put is committed; `stop()` flushes and closes. A transaction the store fails keeps its rows
+  for the next flush (bounded by `max_pending`), so a PostgreSQL restart loses nothing; one a
+  row fails (`unwritable.py`: text no store can encode, a number too large) is written again
+  with its text escaped, and a row that still cannot be written is set aside and reported.
+- `ProcessWriter` (`process.py`) has the same interface and runs a `BatchWriter` in a child
+  process (`python -m softplc.storage.child`), so the runtime's event loop never waits for a
+  writer thread's interpreter lock; its sinks are pickled to the child. The historian uses it on
+  the real clock.
 - `PartitionCatalogue(prefix, lock_key)` names, lists and drops a store's time partitions (one
   table per period, retention drops whole tables); `insert_rows` writes rows into one (COPY on
   PostgreSQL). The historian and the audit trail keep their rows this way.

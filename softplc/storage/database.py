@@ -75,6 +75,14 @@ class Database:
             return bool(found and found[0])
         return connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,)).fetchone() is not None
 
+    def lost(self, connection: Any, error: BaseException) -> bool:
+        """Whether `error` means `connection` is gone (a server restarted) and a new connection may succeed."""
+        if not self.postgresql:
+            return False  # a SQLite file's connection does not go away
+        import psycopg
+
+        return isinstance(error, (psycopg.OperationalError, psycopg.InterfaceError)) or bool(connection.closed or connection.broken)
+
     def connect(self, *, readonly: bool = False) -> Any:
         """A new connection (not thread-safe: use it from one thread). Raises StorageError."""
         if self.postgresql:

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from softplc.util.durations import parse_duration
+from softplc.util.timestamps import parse_span
 from softplc.config.yamlsource import Problem, SourceMap
 
 BACKENDS = ("sqlite", "postgresql")
@@ -28,18 +29,6 @@ STORAGE_PROPERTIES: dict[str, Any] = {
         "type": ["string", "number"],
     },
 }
-
-_SPAN = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*(d|w)\s*$")
-
-
-def parse_span(text: str | int | float) -> float:
-    """Seconds from a duration that may also be written in days or weeks (`30d`, `1w`); raises ValueError."""
-    if isinstance(text, str):
-        match = _SPAN.match(text)
-        if match is not None:
-            return float(match.group(1)) * (86400.0 if match.group(2) == "d" else 604800.0)
-    return parse_duration(text)
-
 
 @dataclass(frozen=True)
 class StorageSettings:

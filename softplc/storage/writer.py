@@ -3,25 +3,33 @@
 A `Sink` is one kind of record (history samples, alarm journal entries): it creates its tables
 and writes its rows with the writer's connection. Every flush period the writer takes all rows
 queued for every sink and commits them in ONE transaction, off the event loop. A commit that
-fails (disk full, server restarting) keeps its rows queued for the next flush, up to
-`max_pending` rows; beyond that the oldest are dropped and counted.
+fails because of the store (disk full, server restarting) keeps its rows queued for the next
+flush, up to `max_pending` rows; beyond that the oldest are dropped and counted. A commit that
+fails because of what a row holds (softplc/storage/unwritable.py: text that is not Unicode, a
+number too large) never stops the store: the batch is written again with its text escaped, and
+a row that still cannot be written is set aside and reported, the rows around it committed.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 from softplc.storage.database import Database, StorageError
+from softplc.storage.unwritable import describe_row, escaped, rows_at_fault
 
 log = logging.getLogger(__name__)
 
 MAINTAIN_PERIOD = 60.0  # seconds between two retention passes
 ERROR_LOG_PERIOD = 60.0  # a failing store is logged once, then at most once a minute
+SET_ASIDE_LOGGED = 5  # rows set aside that are logged one by one per ERROR_LOG_PERIOD (then counted)
+SET_ASIDE_KEPT = 100  # the last rows set aside, kept in memory for a look (`BatchWriter.set_aside_rows`)
 
 
 class Sink(Protocol):
@@ -48,6 +56,9 @@ class WriterStats:
     errors: int = 0
     dropped: int = 0
     pending: int = 0
+    escaped: int = 0  # rows written with their text escaped
+    set_aside: int = 0  # rows that could not be written at all
+    reconnections: int = 0
     last_error: str = ""
     last_commit_seconds: float = 0.0  # wall time of the last transaction
 
@@ -77,6 +88,10 @@ class BatchWriter:
         self._ready = threading.Event()
         self._start_error: BaseException | None = None
         self._last_logged = -ERROR_LOG_PERIOD
+        self._failing = False  # the store failed since the last good transaction: say so when it is back
+        self._set_aside_logged: list[float] = []  # when rows set aside were logged (rate limit)
+        self._set_aside_unlogged = 0
+        self.set_aside_rows: deque[tuple[str, Any, str]] = deque(maxlen=SET_ASIDE_KEPT)  # (sink, row, why)
 
     # -- the event loop's side --------------------------------------------------------------
 
@@ -144,6 +159,7 @@ class BatchWriter:
     # -- the writer thread ------------------------------------------------------------------
 
     def _run(self) -> None:
+        normal_priority()
         last_maintain = time.monotonic()
         try:
             self._open()
@@ -175,13 +191,22 @@ class BatchWriter:
     def _open(self) -> None:
         connection = self.database.connect()
         try:
-            for sink in self._sinks.values():
-                sink.prepare(connection, self.database)
-                connection.commit()
+            self._prepare(connection)
         except BaseException:
             _close_quietly(connection)
             raise
         self._connection = connection
+        if self._failing:
+            self._failing = False
+            with self._lock:
+                self.stats.reconnections += 1
+                pending = self.stats.pending
+            log.warning("%s: reconnected to %s; writing the %d queued rows", self.name, self.database.describe(), pending)
+
+    def _prepare(self, connection: Any) -> None:
+        for sink in self._sinks.values():
+            sink.prepare(connection, self.database)
+            connection.commit()
 
     def _close(self) -> None:
         if self._connection is not None:
@@ -202,24 +227,98 @@ class BatchWriter:
             for name, rows in taken.items():
                 self._sinks[name].write(connection, self.database, rows)
             connection.commit()
-        except Exception as error:  # noqa: BLE001 — a driver error, a full disk, or a bug in a sink: rows kept, error logged
+        except Exception as error:  # noqa: BLE001 — a driver error, a full disk, a row the store refuses, or a bug in a sink
             _rollback_quietly(connection)
-            self._failed(error)
-            self._close()  # reconnect next time: the connection may be what broke
-            with self._lock:
-                for name, rows in taken.items():  # back in front of what arrived meanwhile
-                    self._pending[name][:0] = rows
-                excess = self.stats.pending - self.max_pending
-                if excess > 0:
-                    self._drop_oldest(excess)
+            if rows_at_fault(error):
+                self._write_apart(taken, error)
+            else:
+                self._store_failed(error, taken)
             return
+        self._committed(count, started)
+
+    def _committed(self, count: int, started: float, *, transactions: int = 1) -> None:
         with self._settled_changed:
             self._settled += count
             self.stats.pending -= count
             self.stats.rows_written += count
-            self.stats.transactions += 1
+            self.stats.transactions += transactions
             self.stats.last_commit_seconds = time.perf_counter() - started
             self._settled_changed.notify_all()
+        self._failing = False
+
+    def _store_failed(self, error: BaseException, unwritten: dict[str, list[Any]]) -> None:
+        """The store failed (not the rows): keep `unwritten` in front of the queue, reconnect at the next flush."""
+        self._failed(error)
+        self._close()  # reconnect next time: the connection may be what broke
+        with self._lock:
+            for name, rows in unwritten.items():  # back in front of what arrived meanwhile
+                self._pending[name][:0] = rows
+            excess = self.stats.pending - self.max_pending
+            if excess > 0:
+                self._drop_oldest(excess)
+
+    def _write_apart(self, taken: dict[str, list[Any]], first_error: BaseException) -> None:
+        """A row of `taken` was refused: commit the batch with its text escaped, else in halves down to the rows that cannot be written."""
+        started = time.perf_counter()
+        nul = self.database.postgresql  # PostgreSQL's text cannot hold a NUL; SQLite's can
+        clean = {name: [escaped(row, nul) for row in rows] for name, rows in taken.items()}
+        changed = sum(new is not old for name, rows in taken.items() for new, old in zip(clean[name], rows))
+        unwritten = dict(clean)
+        current, stack = "", []  # the sink being written, and its chunks still to write (the next one last)
+        try:
+            self._prepare(self._connection)  # a rolled back transaction may have undone what a sink remembers (tables, ids)
+            for name in list(unwritten):
+                current, stack = name, [unwritten.pop(name)]
+                while stack:
+                    chunk = stack[-1]
+                    try:
+                        self._sinks[name].write(self._connection, self.database, chunk)
+                        self._connection.commit()
+                    except Exception as error:  # noqa: BLE001
+                        _rollback_quietly(self._connection)
+                        if not rows_at_fault(error):
+                            raise
+                        self._prepare(self._connection)
+                        stack.pop()
+                        if len(chunk) == 1:
+                            self._set_aside(name, chunk[0], error)
+                        else:
+                            middle = len(chunk) // 2
+                            stack += [chunk[middle:], chunk[:middle]]
+                        continue
+                    stack.pop()
+                    self._committed(len(chunk), started)
+        except Exception as error:  # noqa: BLE001 — the store failed meanwhile: keep what was not committed
+            _rollback_quietly(self._connection)
+            if stack:
+                unwritten[current] = [row for part in reversed(stack) for row in part]
+            self._store_failed(error, unwritten)
+        if changed:
+            with self._lock:
+                self.stats.escaped += changed
+            self._report(f"{changed} rows held text no store can encode ({_reason(first_error)}); written with it escaped", log.warning)
+
+    def _set_aside(self, sink: str, row: Any, error: BaseException) -> None:
+        why = _reason(error)
+        self.set_aside_rows.append((sink, row, why))
+        with self._settled_changed:
+            self._settled += 1
+            self.stats.pending -= 1
+            self.stats.set_aside += 1
+            self._settled_changed.notify_all()
+        self._report(f"a {sink} row cannot be written and is set aside ({why}): {describe_row(row)}", log.error)
+
+    def _report(self, message: str, method: Any) -> None:
+        # At most SET_ASIDE_LOGGED lines per ERROR_LOG_PERIOD: a client sending poison cannot flood the log.
+        now = time.monotonic()
+        self._set_aside_logged = [when for when in self._set_aside_logged if now - when < ERROR_LOG_PERIOD]
+        if len(self._set_aside_logged) >= SET_ASIDE_LOGGED:
+            self._set_aside_unlogged += 1
+            return
+        self._set_aside_logged.append(now)
+        more = f" ({self._set_aside_unlogged} more such reports not logged)" if self._set_aside_unlogged else ""
+        self._set_aside_unlogged = 0
+        method("%s: %s%s", self.name, message, more)
 
     def _maintain(self) -> None:
         connection = self._connection
@@ -232,6 +331,8 @@ class BatchWriter:
         except Exception as error:  # noqa: BLE001
             _rollback_quietly(connection)
             self._failed(error)
+            if not rows_at_fault(error):
+                self._close()  # a connection that died while idle (a server restart): reconnect at the next flush
         finally:
             with self._settled_changed:
                 self._maintain_requested = False
@@ -253,9 +354,10 @@ class BatchWriter:
         self._settled_changed.notify_all()
 
     def _failed(self, error: BaseException) -> None:
+        self._failing = True
         with self._settled_changed:
             self.stats.errors += 1
-            self.stats.last_error = str(error).strip() or type(error).__name__
+            self.stats.last_error = _reason(error)
             self._settled_changed.notify_all()
         now = time.monotonic()
         if now - self._last_logged >= ERROR_LOG_PERIOD:
@@ -263,6 +365,20 @@ class BatchWriter:
             kept = "keeping" if self.stats.dropped == 0 else "dropping the oldest beyond"
             log.error("%s: cannot write to %s: %s (%s %d queued rows, retrying every %.3g s)",
                       self.name, self.database.describe(), self.stats.last_error, kept, self.stats.pending, self.flush_period)
+
+
+def normal_priority() -> None:
+    """Run this thread under the normal policy even if it inherited the loop's SCHED_FIFO (`softplc run --rt-priority`)."""
+    # A writer at real-time priority would take a CPU from everything else for as long as it has rows to write.
+    if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR):
+        try:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:
+            pass
+
+
+def _reason(error: BaseException) -> str:
+    return str(error).strip() or type(error).__name__
 
 
 def _rollback_quietly(connection: Any) -> None:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from datetime import datetime
 from fnmatch import fnmatchcase
 from typing import Any
 
@@ -33,6 +32,7 @@ from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.util.durations import parse_duration
 from softplc.storage.command_search import search_for_command
 from softplc.core.tagdb import Origin
+from softplc.util.timestamps import format_shown, parse_utc
 
 STATE_FILTERS = ("all", "annunciated", "active", "unacknowledged", "shelved", "suppressed", "out_of_service", "normal")
 
@@ -79,7 +79,7 @@ def register_alarm_commands(commands: Commands, engine: AlarmEngine, actions: Al
         duration = _duration(arguments.get("duration")) if arguments.get("duration") is not None else None
         snapshot = actions.shelve(_required(arguments, "alarm"), origin, _text(arguments, "reason", ""), duration, one_shot)
         assert snapshot.shelving is not None
-        until = datetime.fromtimestamp(snapshot.shelving.until).isoformat(timespec="seconds")
+        until = format_shown(snapshot.shelving.until)
         how = "until it returns to normal" if one_shot else "for " + _format_seconds(duration or 0.0)
         return f"shelved {snapshot.name} {how} (at the latest {until})"
 
@@ -111,7 +111,7 @@ def register_alarm_commands(commands: Commands, engine: AlarmEngine, actions: Al
           "name": "name pattern (* and ?)", "priority": "lowest priority shown: low, medium, high, critical"}),
         ("alarms.summary", summary, Permission.VIEW, "see the alarm summary", {}),
         ("alarms.journal", journal_rows, Permission.VIEW, "read the alarm journal",
-         {"alarm": "name or pattern", "since": "from (epoch s or ISO 8601)", "until": "to (epoch s or ISO 8601)",
+         {"alarm": "name or pattern", "since": "from (epoch s or ISO 8601, UTC unless a zone is given)", "until": "to, excluded (epoch s or ISO 8601)",
           "text": "text in the message, comment or user", "user": "who acted", "transition": "a transition or a list of them",
           "limit": "most rows (default 1000)", "offset": "rows to skip", "plant": "another plant's rows (shared journal), * for all"}),
         ("alarms.acknowledge", acknowledge, Permission.ACKNOWLEDGE, "acknowledge alarms", {**name_argument, "comment": "optional comment"}),
@@ -176,10 +176,10 @@ def _time(value: Any, key: str) -> float | None:
         return float(value)
     if isinstance(value, str):
         try:
-            return datetime.fromisoformat(value).timestamp()
+            return parse_utc(value)  # UTC unless it gives a zone: never the runtime host's zone (softplc/util/timestamps.py)
         except ValueError:
             pass
-    raise CommandRefused(f"'{key}' must be epoch seconds or an ISO 8601 time such as 2026-11-24T08:00, not {value!r}")
+    raise CommandRefused(f"'{key}' must be epoch seconds or an ISO 8601 time such as 2026-11-24T08:00 (UTC unless a zone is given), not {value!r}")
 
 
 def _journal_query(arguments: Mapping[str, Any]) -> JournalQuery:

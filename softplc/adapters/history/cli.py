@@ -38,8 +38,9 @@ def add_commands(subparsers: Any) -> None:
     tags.set_defaults(func=cmd_tags)
     export = commands.add_parser("export", help="write the history of tags as CSV or JSON")
     export.add_argument("tags", nargs="+", metavar="TAG", help="tag names or glob patterns (r01_*)")
-    export.add_argument("--from", dest="start", metavar="TIME", help="start (default: the first sample)")
-    export.add_argument("--to", dest="end", metavar="TIME", help="end, excluded (default: after the last sample)")
+    export.add_argument("--from", dest="start", metavar="TIME", help="start: ISO 8601, UTC unless a zone is given (2026-01-01T08:00), Unix seconds, or -DURATION "
+                        "before the last sample (--from=-10min); default: the first sample")
+    export.add_argument("--to", dest="end", metavar="TIME", help="end, excluded (same forms; default: after the last sample)")
     export.add_argument("--format", choices=("csv", "json"), default="csv")
     export.add_argument("--interval", metavar="DURATION", help="one processed value per interval instead of the raw samples")
     export.add_argument("--aggregate", default="time_average", choices=[a.value for a in Aggregate],

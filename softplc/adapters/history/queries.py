@@ -282,23 +282,50 @@ class HistoryReader:
 
     def _query(self, sql: str, parameters: Sequence[Any]) -> list[tuple[Any, ...]]:
         with self._lock:
-            if self._connection is None:
-                if not self.database.exists():
-                    raise StorageError(f"no history store at {self.database.describe()}")
-                self._connection = self.database.connect(readonly=True)
-            cursor = self._connection.cursor()
             try:
-                cursor.execute(self.database.sql(sql), tuple(parameters))
-                rows = cursor.fetchall()
+                return self._execute(sql, parameters)
             except Exception as error:
-                if self.database.postgresql:
-                    self._connection.rollback()
-                if "history_" in str(error) and ("no such table" in str(error) or "does not exist" in str(error)):
-                    raise StorageError(f"{self.database.describe()} holds no history (no history tables)") from error
-                raise
+                if self._connection is None or not self.database.lost(self._connection, error):
+                    raise
+            # The server went away since the last read (a PostgreSQL restart): once more on a new
+            # connection, so a reader never keeps answering "the connection is closed".
+            connection, self._connection = self._connection, None
+            _close_quietly(connection)
+            return self._execute(sql, parameters)
+
+    def _execute(self, sql: str, parameters: Sequence[Any]) -> list[tuple[Any, ...]]:
+        if self._connection is None:
+            if not self.database.exists():
+                raise StorageError(f"no history store at {self.database.describe()}")
+            self._connection = self.database.connect(readonly=True)
+        connection = self._connection
+        try:
+            cursor = connection.cursor()
+            cursor.execute(self.database.sql(sql), tuple(parameters))
+            rows = cursor.fetchall()
+        except Exception as error:
             if self.database.postgresql:
-                self._connection.rollback()  # end the read transaction: no snapshot held between calls
-            return rows
+                _rollback_quietly(connection)
+            if "history_" in str(error) and ("no such table" in str(error) or "does not exist" in str(error)):
+                raise StorageError(f"{self.database.describe()} holds no history (no history tables)") from error
+            raise
+        if self.database.postgresql:
+            connection.rollback()  # end the read transaction: no snapshot held between calls
+        return rows
+
+
+def _rollback_quietly(connection: Any) -> None:
+    try:
+        connection.rollback()
+    except Exception:  # noqa: BLE001 — a lost connection: the error that lost it is what the caller sees
+        pass
+
+
+def _close_quietly(connection: Any) -> None:
+    try:
+        connection.close()
+    except Exception:  # noqa: BLE001
+        pass
 
 
 def _sample(row: tuple[Any, ...], info: TagInfo) -> Sample:

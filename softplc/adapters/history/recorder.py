@@ -1,11 +1,12 @@
-"""The historian adapter: listens to tag changes, filters them, hands the rows to the writer thread.
+"""The historian adapter: listens to tag changes, filters them, hands the rows to the store's writer.
 
 Each recorded tag has a `TagFilter`: an exception deadband (a value is kept only when it moved
 more than the deadband since the last kept one), then swinging-door compression when the rule
 asks for it. A quality change is always recorded (the held value first, so the shape is kept).
-Filtering runs on the event loop inside the change notification (a few microseconds a value);
-the SQL runs on the store's one writer thread. Timestamps are the tags' own (the runtime clock's
-wall time: simulated under --sim).
+Filtering runs on the event loop inside the change notification (under a microsecond a value);
+the rows go to the writer, which runs in a process of its own on the real clock
+(softplc/storage/process.py) and in a thread under --sim. Timestamps are the tags' own (the
+runtime clock's wall time: simulated under --sim).
 """
 
 from __future__ import annotations
@@ -19,10 +20,12 @@ from typing import TYPE_CHECKING, Any
 from softplc.adapters.history.commands import register_history_commands
 from softplc.adapters.history.queries import HistoryReader
 from softplc.adapters.history.settings import HistorySettings, TagPolicy
+from softplc.adapters.history.columns import QUALITY_CODES
 from softplc.adapters.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.adapters.history.swinging_door import SwingingDoor
 from softplc.util.realtime import shorten_switch_interval
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
+from softplc.storage.process import ProcessWriter
 from softplc.core.tags import Quality, Tag
 
 if TYPE_CHECKING:
@@ -30,14 +33,17 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-Row = tuple[str, float, Any, Quality]
+# A row to store: (tag name, time, value, quality code: 0 good, 1 uncertain, 2 bad). Only atomic values,
+# so the collector stops tracking the tuple at its first pass: rows queued for a flush period never
+# reach the older generations, whose collections would otherwise hold the event loop for milliseconds.
+Row = tuple[str, float, Any, int]
 HEARTBEAT_TICK = 1.0  # s of runtime clock between two heartbeat checks
 
 
 class TagFilter:
     """Decides which values of one tag are stored (deadband, then compression)."""
 
-    __slots__ = ("name", "deadband", "door", "numeric", "last", "quality")
+    __slots__ = ("name", "deadband", "door", "numeric", "last", "quality", "code")
 
     def __init__(self, name: str, policy: TagPolicy, numeric: bool) -> None:
         self.name = name
@@ -46,48 +52,52 @@ class TagFilter:
         self.numeric = numeric
         self.last: Any = None  # the last value passed on (deadband reference)
         self.quality: Quality | None = None
+        self.code = 0  # the quality's code in rows
 
     def offer(self, when: float, value: Any, quality: Quality) -> list[Row]:
         """The rows to store for a new value of the tag."""
         name = self.name
         if quality is not self.quality or self.last is None:
             rows: list[Row] = []
+            code = QUALITY_CODES[quality]
             door = self.door
             if door is not None:
-                rows = [(name, t, v, self.quality or quality) for t, v in door.release()]
+                held = self.code if self.quality is not None else code
+                rows = [(name, t, v, held) for t, v in door.release()]
                 door.restart()
                 if quality is not Quality.BAD:
                     door.offer(when, value)
-            self.last, self.quality = value, quality
-            rows.append((name, when, value, quality))
+            self.last, self.quality, self.code = value, quality, code
+            rows.append((name, when, value, code))
             return rows
         if not self.numeric:
             self.last = value
-            return [(name, when, value, quality)]
+            return [(name, when, value, self.code)]
         if self.deadband and abs(value - self.last) <= self.deadband:
             return []
         self.last = value
         door = self.door
         if door is None or quality is Quality.BAD:
-            return [(name, when, value, quality)]
-        return [(name, t, v, quality) for t, v in door.offer(when, value)]
+            return [(name, when, value, self.code)]
+        code = self.code
+        return [(name, t, v, code) for t, v in door.offer(when, value)]
 
     def heartbeat(self, now: float) -> list[Row]:
         """Store the held value, or repeat the current one, when max_interval has passed."""
         door = self.door
         if door is None or not door.due(now) or self.quality is None:
             return []
-        rows = [(self.name, t, v, self.quality) for t, v in door.release()]
+        rows = [(self.name, t, v, self.code) for t, v in door.release()]
         if not rows and self.quality is not Quality.BAD:
             door.restart()
-            rows = [(self.name, t, v, self.quality) for t, v in door.offer(now, self.last)]
+            rows = [(self.name, t, v, self.code) for t, v in door.offer(now, self.last)]
         return rows
 
     def release(self) -> list[Row]:
         """The held value, stored now (the end of recording)."""
         if self.door is None or self.quality is None:
             return []
-        return [(self.name, t, v, self.quality) for t, v in self.door.release()]
+        return [(self.name, t, v, self.code) for t, v in self.door.release()]
 
 
 class HistoryRecorder:
@@ -102,7 +112,7 @@ class HistoryRecorder:
         self.policies = policies
         self.types = types
         self.storage: StorageSettings | None = None
-        self.writer: BatchWriter | None = None
+        self.writer: BatchWriter | ProcessWriter | None = None
         self.filters: dict[str, TagFilter] = {}
         self._unsubscribe: Any = None
         self._due: list[tuple[float, str]] = []  # heartbeat deadlines (runtime wall time), a heap
@@ -127,9 +137,16 @@ class HistoryRecorder:
         infos = [TagInfo(name, kind, unit, self.policies[name].stepped) for name, (kind, unit) in self.types.items()]
         sink = HistorySink(self.plant, infos, partition=self.settings.partition, retention=self.settings.retention)
         database = Database(self.storage)
-        writer = BatchWriter(database, name="softplc-history-writer")
+        writer: BatchWriter | ProcessWriter
+        if simulated:
+            # On the simulated clock no cycle can be late: a thread, no process to start.
+            writer = BatchWriter(database, name="softplc-history-writer")
+            shorten_switch_interval()  # the writer thread holds the interpreter lock between its SQL calls
+        else:
+            # On the real clock the writer runs in a process of its own: a thread would hold the event
+            # loop's interpreter lock now and then, and keep it while the machine preempts it.
+            writer = ProcessWriter(database, name="softplc-history-writer")
         writer.register(sink)
-        shorten_switch_interval()  # the writer thread builds rows in Python between its SQL calls
         error = await plant.clock.run_blocking(writer.start)
         if error is not None:
             if not database.postgresql:

@@ -21,19 +21,20 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
+from softplc.adapters.history.columns import QUALITY_CODES, Cells, Columns, copy_binary, to_columns
 from softplc.storage import Database
-from softplc.storage.partitions import PartitionCatalogue, insert_rows
-from softplc.core.tags import Quality
+from softplc.storage.partitions import PartitionCatalogue
 
 log = logging.getLogger(__name__)
 
 SINK_NAME = "history"
 LEVELS = (("s10", 10.0), ("m1", 60.0), ("h1", 3600.0))  # min/max cell tables: suffix, cell width (s)
-QUALITY_CODES = {Quality.GOOD: 0, Quality.UNCERTAIN: 1, Quality.BAD: 2}
 QUALITIES = {code: quality for quality, code in QUALITY_CODES.items()}
 DEFAULT_PARTITION = 86400.0
 PARTITIONS = PartitionCatalogue("history", lock_key=16_007, suffixes=[suffix for suffix, _ in LEVELS])
@@ -94,55 +95,26 @@ class HistorySink:
         self._register(connection, database, list(self.tags.values()))
 
     def write(self, connection: Any, database: Database, rows: list[Any]) -> None:
-        by_partition: dict[float, list[tuple[Any, ...]]] = {}
-        cells: dict[str, dict[tuple[int, float], list[float]]] = {suffix: {} for suffix, _ in LEVELS}
+        columns = to_columns(rows, self._ids, lambda names: self._register_names(connection, database, names))
+        if not len(columns):
+            return
+        self.latest = max(self.latest, float(columns.times.max()))
+        columns = columns.sorted()  # the index's order: SQLite inserts in runs
+        # 10 s cells from the samples, minutes from those, hours from those
+        levels = [(LEVELS[0][0], Cells.of_samples(columns, LEVELS[0][1]))]
+        for suffix, width in LEVELS[1:]:
+            levels.append((suffix, levels[-1][1].coarser(width)))
         size = self.partition
-        current_start, current_stop, current = math.inf, -math.inf, None
-        ids = self._ids
-        unknown = [name for name, *_ in rows if name not in ids]
-        if unknown:
-            self._register(connection, database, [self.tags.get(name) or TagInfo(name, "float64") for name in dict.fromkeys(unknown)])
-        latest = self.latest
-        good = Quality.GOOD
-        levels = [(cells[suffix], width) for suffix, width in LEVELS]
-        for name, when, value, quality in rows:
-            if not current_start <= when < current_stop:
-                current_start = math.floor(when / size) * size
-                current_stop = current_start + size
-                current = by_partition.setdefault(current_start, [])
-            tag = ids[name]
-            code = 0 if quality is good else QUALITY_CODES[quality]
-            if when > latest:
-                latest = when
-            if value.__class__ is str:
-                current.append((tag, when, None, value, code))
-                continue
-            number = float(value)
-            if number != number:  # NaN: stored as NULL by SQLite anyway; kept out of the cells
-                current.append((tag, when, None, None, code))
-                continue
-            current.append((tag, when, number, None, code))
-            if code == 2:
-                continue
-            for level, width in levels:
-                key = (tag, when - when % width)
-                cell = level.get(key)
-                if cell is None:
-                    level[key] = [1, number, when, number, when]
-                else:
-                    cell[0] += 1
-                    if number < cell[1]:
-                        cell[1], cell[2] = number, when
-                    elif number > cell[3]:
-                        cell[3], cell[4] = number, when
-        self.latest = latest
-        for start, samples in by_partition.items():
+        starts = np.floor(columns.times / size) * size
+        partitions = np.unique(starts).tolist()
+        for start in partitions:
             table = self._partition(connection, database, start)
-            insert_rows(connection, database, table, SAMPLE_COLUMNS, samples)
-            for suffix, width in LEVELS:
-                level = [(tag, cell, *values) for (tag, cell), values in cells[suffix].items() if start <= cell < start + size]
-                if level:
-                    _upsert_cells(connection, database, f"{table}_{suffix}", level)
+            samples = columns if len(partitions) == 1 else columns.select(starts == start)
+            _insert_samples(connection, database, table, samples)
+            for suffix, cells in levels:
+                inside = cells if len(partitions) == 1 else cells.within(start, start + size)
+                if len(inside):
+                    _upsert_cells(connection, database, f"{table}_{suffix}", inside.parameters())
 
     def maintain(self, connection: Any, database: Database) -> None:
         if self.retention is None or self.latest == -math.inf:
@@ -151,6 +123,10 @@ class HistorySink:
         self._partitions.clear()
 
     # -- internals ------------------------------------------------------------------------
+
+    def _register_names(self, connection: Any, database: Database, names: Collection[str]) -> None:
+        """Tags not declared to the sink (a float unless known): registered as they come."""
+        self._register(connection, database, [self.tags.get(name) or TagInfo(name, "float64") for name in sorted(names)])
 
     def _register(self, connection: Any, database: Database, infos: list[TagInfo]) -> None:
         if not infos:
@@ -179,7 +155,18 @@ def _create_partition(cursor: Any, name: str) -> None:
                        "vmax DOUBLE PRECISION NOT NULL, tmax DOUBLE PRECISION NOT NULL, PRIMARY KEY (tag, cell))")
 
 
-def _upsert_cells(connection: Any, database: Database, table: str, cells: list[tuple[Any, ...]]) -> None:
+def _insert_samples(connection: Any, database: Database, table: str, samples: Columns) -> None:
+    """The raw samples into a partition: one executemany on SQLite, one binary COPY on PostgreSQL."""
+    cursor = connection.cursor()
+    if database.postgresql:
+        with cursor.copy(f"COPY {table} ({', '.join(SAMPLE_COLUMNS)}) FROM STDIN (FORMAT BINARY)") as copy:
+            for data in copy_binary(samples):
+                copy.write(data)
+    else:
+        cursor.executemany(f"INSERT INTO {table} ({', '.join(SAMPLE_COLUMNS)}) VALUES (?, ?, ?, ?, ?)", samples.parameters())
+
+
+def _upsert_cells(connection: Any, database: Database, table: str, cells: Iterable[tuple[Any, ...]]) -> None:
     least, greatest = ("LEAST", "GREATEST") if database.postgresql else ("min", "max")
     statement = (
         f"INSERT INTO {table} (tag, cell, count, vmin, tmin, vmax, tmax) VALUES (?, ?, ?, ?, ?, ?, ?) "

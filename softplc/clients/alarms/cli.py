@@ -17,11 +17,12 @@ import json
 import logging
 import math
 import sys
-from datetime import datetime
+import time
 from pathlib import Path
 from typing import Any
 
 from softplc.clients.login import Login, LoginError, Security, add_login_arguments, login_from_args
+from softplc.util.timestamps import TIME_HELP, format_shown, parse_time
 
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
 # What each action needs, to say so when the runtime refuses a session's role.
@@ -90,11 +91,13 @@ def add_commands(subparsers: Any) -> None:
     back.add_argument("--reason", default="")
     back.set_defaults(func=cmd_in_service)
     journal = commands.add_parser("journal", help="the journal of transitions and actions, newest first",
+                                  description="The alarm journal, newest first. Times shown and typed are UTC: a time "
+                                  "without a zone is read as UTC, whatever this computer's or the runtime's zone.",
                                   epilog="Examples: softplc alarms journal --since 8h | softplc alarms journal --alarm 't01_*' --by otto | "
                                   "softplc alarms journal --since 2026-11-24T08:00 --export csv --out journal.csv")
     journal.add_argument("--alarm", metavar="PATTERN", help="alarm name or pattern (* and ?)")
-    journal.add_argument("--since", metavar="TIME", help="ISO time (2026-11-24T08:00) or how long ago (8h, 30min)")
-    journal.add_argument("--until", metavar="TIME", help="ISO time or how long ago")
+    journal.add_argument("--since", metavar="TIME", help=f"from TIME: {TIME_HELP}")
+    journal.add_argument("--until", metavar="TIME", help="up to TIME, excluded (same forms)")
     journal.add_argument("--text", help="text in the message, comment or user")
     journal.add_argument("--by", dest="by_user", metavar="USER", help="actions of this user")
     journal.add_argument("--transition", action="append", default=[], help="e.g. activated, acknowledged, shelved (repeatable)")
@@ -299,22 +302,16 @@ def _old_certificate_options(args: argparse.Namespace) -> None:
 
 
 def _time(text: str | None, option: str) -> float | None:
-    """Epoch seconds of an ISO time, or of now minus a duration ('8h', '30min')."""
+    """Epoch seconds of an ISO time (UTC unless it gives a zone), or of now minus a duration ('8h', '30min')."""
     if not text:
         return None
-    from softplc.util.durations import parse_duration
-
     try:
-        return datetime.now().timestamp() - parse_duration(text)
-    except ValueError:
-        pass
-    try:
-        return datetime.fromisoformat(text).timestamp()
-    except ValueError:
-        raise ValueError(f"{option} {text!r}: write an ISO time such as 2026-11-24T08:00, or how long ago such as 8h or 30min") from None
+        return parse_time(text, time.time())
+    except ValueError as error:
+        raise ValueError(f"{option} {error}") from None
 
 
 def _when(seconds: Any) -> str:
     if not isinstance(seconds, (int, float)) or not seconds:
         return ""
-    return datetime.fromtimestamp(seconds).isoformat(sep=" ", timespec="seconds")
+    return format_shown(seconds)

@@ -21,14 +21,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from softplc.adapters.audit.commands import parse_time as parse_absolute
 from softplc.core.commands import CommandRefused
 from softplc.clients.login import LoginError, add_login_arguments, login_from_args
+from softplc.util.timestamps import TIME_HELP, format_shown, parse_time
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
 TABLE_LIMIT = 100  # rows a table shows unless --limit says otherwise (csv and json: every row)
 PAGE = 1000  # rows per audit.query call
-HEADER = ("time (UTC)", "source", "user", "peer", "tag / command", "old", "new", "result")
+HEADER = ("time", "source", "user", "peer", "tag / command", "old", "new", "result")
 
 
 def add_commands(subparsers: Any) -> None:
@@ -45,7 +45,7 @@ def add_commands(subparsers: Any) -> None:
         "opc.tcp://plc7:4840/softplc/ --user eng",
     )
     what = audit.add_argument_group("what to show")
-    what.add_argument("--since", metavar="TIME", help="from TIME: how long ago (30min, 8h, 7d) or ISO 8601 (UTC unless a zone is given)")
+    what.add_argument("--since", metavar="TIME", help=f"from TIME: {TIME_HELP}")
     what.add_argument("--until", metavar="TIME", help="up to TIME, excluded (same forms)")
     what.add_argument("--tag", metavar="GLOB", help="writes of these tags, and commands acting on them (a force)")
     what.add_argument("--command", metavar="GLOB", help="calls of these commands (tags.force, 'alarms.*')")
@@ -111,16 +111,10 @@ def _arguments(args: argparse.Namespace, now: float) -> dict[str, Any]:
 def _time(text: str | None, option: str, now: float) -> float | None:
     if not text:
         return None
-    from softplc.storage import parse_span
-
     try:
-        return now - parse_span(text)
-    except ValueError:
-        pass
-    try:
-        return parse_absolute(text, option)
-    except CommandRefused:
-        raise _Failure(f"{option} {text!r}: write how long ago (30min, 8h, 7d) or an ISO 8601 time such as 2026-11-24T08:00", EXIT_USAGE) from None
+        return parse_time(text, now)
+    except ValueError as error:
+        raise _Failure(f"{option} {error}", EXIT_USAGE) from None
 
 
 # -- reading the store ------------------------------------------------------------------------
@@ -227,7 +221,7 @@ def _show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> None:
         elif rows:
             from softplc.util.console import print_table
 
-            table = [[row["time_utc"].replace("T", " ").rstrip("Z"), row["source"], row["user"], row["peer"], _what(row),
+            table = [[format_shown(row["time"], milliseconds=True), row["source"], row["user"], row["peer"], _what(row),
                       format_value(row["old"]), format_value(row["new"]), _result(row)] for row in rows]
             print_table(table, HEADER, stream)
     finally:

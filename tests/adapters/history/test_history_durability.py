@@ -2,7 +2,9 @@
 
 A real `softplc run` child records 200 tags changing every 10 ms (20,000 values/s); the test
 reads and exports its history while it runs (WAL: readers never block the writer), kills it with
-SIGKILL, then checks the store's integrity and how much was lost, on SQLite and on PostgreSQL.
+SIGKILL, waits for the history writer's own process to commit what it had received and exit (it
+must not outlive the runtime), then checks the store's integrity and how much was lost, on
+SQLite and on PostgreSQL.
 """
 
 from __future__ import annotations
@@ -54,6 +56,14 @@ history:
 """
 
 
+def children_of(pid: int) -> list[int]:
+    """The processes `pid` started (Linux)."""
+    found = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        found += [int(text) for text in (task / "children").read_text().split()]
+    return found
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
 def test_kill_9_under_heavy_recording_keeps_the_store_intact(backend: str, tmp_path: Path, request: pytest.FixtureRequest) -> None:
@@ -90,9 +100,16 @@ def test_kill_9_under_heavy_recording_keeps_the_store_intact(backend: str, tmp_p
         lines = export.stdout.splitlines()
         assert lines[0] == "tag,time,value,quality" and len(lines) > 20 and lines[-1].startswith("v199,")
         time.sleep(1.0)  # recording goes on at full rate
+        writers = children_of(child.pid)  # the history writer's process (softplc/storage/process.py)
+        assert len(writers) == 1, writers
         killed_at = time.time()
         os.kill(child.pid, signal.SIGKILL)
         child.wait(timeout=30)
+        # The writer reads the end of its input, commits what it received and exits: it never outlives the runtime.
+        deadline = time.monotonic() + 30
+        while Path(f"/proc/{writers[0]}").exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not Path(f"/proc/{writers[0]}").exists(), "the history writer's process outlived the runtime"
     finally:
         if child.poll() is None:
             child.kill()

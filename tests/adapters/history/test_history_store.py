@@ -9,6 +9,7 @@ from typing import Any
 import pytest
 
 from softplc.adapters.history.aggregates import Aggregate, Sample
+from softplc.adapters.history.columns import QUALITY_CODES
 from softplc.adapters.history.queries import Continuation, HistoryReader, UnknownTag
 from softplc.adapters.history.store import HistorySink, TagInfo
 from softplc.storage import BatchWriter, Database, StorageSettings
@@ -32,7 +33,7 @@ class Store:
         self.reader = HistoryReader(self.database, plant)
 
     def write(self, rows: Iterable[tuple[str, float, Any, Quality]], *, maintain: bool = False) -> None:
-        self.writer.put("history", rows)
+        self.writer.put("history", [(name, when, value, QUALITY_CODES[quality]) for name, when, value, quality in rows])
         assert self.writer.flush(timeout=60, maintain=maintain)
 
     def close(self) -> None:
@@ -162,3 +163,66 @@ def test_two_plants_share_one_store(storage_settings: StorageSettings) -> None:
     finally:
         first.close()
         second.close()
+
+
+def reference_cells(rows: list[tuple[str, float, Any, Quality]], width: float) -> dict[tuple[str, float], tuple[int, float, float, float, float]]:
+    """Per (tag, cell): count, least value and its time, greatest and its time (the earliest on ties) — one sample at a time."""
+    cells: dict[tuple[str, float], list[float]] = {}
+    for name, when, value, quality in rows:
+        if quality is BAD or isinstance(value, str) or value != value:
+            continue
+        key = (name, when - when % width)
+        cell = cells.get(key)
+        if cell is None:
+            cells[key] = [1, float(value), when, float(value), when]
+            continue
+        cell[0] += 1
+        if value < cell[1]:
+            cell[1], cell[2] = float(value), when
+        if value > cell[3]:
+            cell[3], cell[4] = float(value), when
+    return {key: tuple(cell) for key, cell in cells.items()}  # type: ignore[misc]
+
+
+def stored_cells(store: Store, suffix: str) -> dict[tuple[str, float], tuple[int, float, float, float, float]]:
+    connection = store.database.connect(readonly=True)
+    try:
+        names = dict(connection.execute("SELECT id, name FROM history_tags").fetchall())
+        found = {}
+        for (table,) in connection.execute("SELECT name FROM history_partitions").fetchall():
+            for tag, cell, count, vmin, tmin, vmax, tmax in connection.execute(f"SELECT tag, cell, count, vmin, tmin, vmax, tmax FROM {table}_{suffix}"):
+                found[(names[tag], cell)] = (count, vmin, tmin, vmax, tmax)
+        return found
+    finally:
+        connection.close()
+
+
+def test_samples_and_min_max_cells_of_many_batches_are_those_computed_one_sample_at_a_time(storage_settings: StorageSettings) -> None:
+    import random
+
+    generator = random.Random(16)
+    store = Store(storage_settings, partition=3600.0)
+    try:
+        every: list[tuple[str, float, Any, Quality]] = []
+        when = T0 - 1800.0  # across a partition boundary (hourly partitions) and many cells
+        for _batch in range(6):
+            rows = []
+            for _ in range(3000):
+                when += generator.choice([0.0, 0.25, 1.0, 7.0])  # ties on one instant too
+                name = generator.choice(["level", "count", "on", "state"])
+                quality = generator.choice([GOOD, GOOD, GOOD, Quality.UNCERTAIN, BAD])
+                value: Any = {"level": generator.choice([1.5, 2.5, math.nan, generator.uniform(-5, 5)]),
+                              "count": generator.randint(-3, 3), "on": generator.random() < 0.5,
+                              "state": generator.choice(["idle", "busy"])}[name]
+                rows.append((name, when, value, quality))
+            store.write(rows)
+            every += rows
+        for suffix, width in (("s10", 10.0), ("m1", 60.0), ("h1", 3600.0)):
+            expected = reference_cells(every, width)
+            assert stored_cells(store, suffix) == expected, suffix
+        for tag in ("state", "level", "count", "on"):
+            stored = store.reader.raw(tag, T0 - 1800, when + 1).samples
+            expected = [(t, "nan" if value != value else value, quality) for name, t, value, quality in every if name == tag]
+            assert sorted(((s.time, "nan" if s.value != s.value else s.value, s.quality) for s in stored), key=repr) == sorted(expected, key=repr), tag
+    finally:
+        store.close()

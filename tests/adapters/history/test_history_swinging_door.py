@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from softplc.adapters.history.columns import QUALITY_CODES
 from softplc.adapters.history.recorder import TagFilter
 from softplc.adapters.history.settings import TagPolicy
 from softplc.adapters.history.swinging_door import SwingingDoor
@@ -85,12 +86,13 @@ def test_a_quality_change_is_recorded_with_the_held_value_first() -> None:
     for when, value, quality in [(0, 0.0, Quality.GOOD), (1, 0.1, Quality.GOOD), (2, 0.2, Quality.GOOD),
                                  (3, 0.2, Quality.BAD), (4, 0.2, Quality.BAD), (5, 7.0, Quality.GOOD)]:
         rows += tag.offer(float(when), value, quality)
+    good, bad = QUALITY_CODES[Quality.GOOD], QUALITY_CODES[Quality.BAD]
     assert [(r[1], r[2], r[3]) for r in rows] == [
-        (0, 0.0, Quality.GOOD),
-        (2, 0.2, Quality.GOOD),  # the held value, released by the change of quality
-        (3, 0.2, Quality.BAD),
-        (4, 0.2, Quality.BAD),  # a bad value is not compressed
-        (5, 7.0, Quality.GOOD),
+        (0, 0.0, good),
+        (2, 0.2, good),  # the held value, released by the change of quality
+        (3, 0.2, bad),
+        (4, 0.2, bad),  # a bad value is not compressed
+        (5, 7.0, good),
     ]
 
 
