@@ -187,7 +187,7 @@ class HistoryRecorder:
         # gap over the outage, not a line across it.
         assert self._plant is not None
         end = max([self._plant.clock.wall(), *(row[1] for row in rows)])
-        rows += [(name, end, math.nan, Quality.BAD) for name in self.filters]
+        rows += [(name, end, math.nan, QUALITY_CODES[Quality.BAD]) for name in self.filters]
         writer.put(SINK_NAME, rows)
         await self._plant.clock.run_blocking(writer.stop)
         self.writer = None
