@@ -25,6 +25,7 @@ from softplc.durations import parse_duration
 from softplc.events import EventBus
 from softplc.expression import Condition
 from softplc.online_change import OnlineChange
+from softplc.plurals import plural
 from softplc.program import ProgramContext
 from softplc.program_control import register_program_commands
 from softplc.retain import RetainStore, open_retained
@@ -251,7 +252,12 @@ class Runtime:
             self._stall_detector.stop()
         for adapter in reversed(self.adapters):
             await _quietly(adapter.stop(), adapter.name)
+            # Its clients were told their writes were accepted (journaled), up to its very last
+            # answer: apply them now, no scan will, while the adapters still running (historian,
+            # alarms, audit) see them; the last save below keeps the retained ones.
+            self._apply_accepted_writes()
         await self._cancel_background()
+        self._apply_accepted_writes()
         if self.db.forces:
             log.warning("%d forced tag(s) released by the stop (forces are not retained): %s",
                         len(self.db.forces), ", ".join(force.tag for force in self.db.forces.active()))
@@ -373,6 +379,16 @@ class Runtime:
                 # The value now, on the loop thread: the saving thread never reads a changing tag,
                 # and a force applied later never reaches the store.
                 self._retain_dirty[tag.name] = (tag.definition.type.value, tag.value)
+
+    def _apply_accepted_writes(self) -> None:
+        """At stop: apply the writes still journaled (the scan that would have applied them has ended)."""
+        try:
+            applied = self.db.apply_journal()
+        except Exception:  # a listener's failure must not cost the shutdown (and the save after it)
+            log.exception("applying the writes accepted before the stop failed")
+            return
+        if applied:
+            log.info("stop: %s accepted before the stop applied", plural(applied, "write"))
 
     def _flush_retained(self) -> None:
         """Save retained changes now (at shutdown)."""
