@@ -52,6 +52,9 @@ EXCEPTION_FOR_RULE: dict[Rule, ExcCodes] = {
     Rule.OUT_OF_RANGE: ExcCodes.ILLEGAL_VALUE,
     Rule.ACCESS_DENIED: ExcCodes.ILLEGAL_ADDRESS,
     Rule.INVALID_REQUEST: ExcCodes.ILLEGAL_ADDRESS,
+    # Forced by an engineer: not writable until unforced, like a read-only tag. Not 04 (the server
+    # did not fail) nor 06 "busy" (the client would retry a write that cannot succeed).
+    Rule.FORCED: ExcCodes.ILLEGAL_ADDRESS,
 }
 # The read that pymodbus does after FC5/FC6 builds the echo of the request: leave the
 # just-written words in place instead of refreshing them from the (not yet applied) tag.
