@@ -44,10 +44,13 @@ COMMAND_MODULES: tuple[str, ...] = ("softplc.modbus.cli", "softplc.svm.commands"
 log = logging.getLogger("softplc")
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, *, process: bool = False) -> int:
+    """Run one command; `process`: this is the `softplc` process itself (softplc/entry_point.py),
+    which keeps ignoring stop signals after `run` until it exits, rather than restoring them."""
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
+        args.process = process
         try:
             logs.configure(logs.options_from_args(args))
         except logs.LogFileError as error:
@@ -330,7 +333,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             return EXIT_OK
         return EXIT_OK if runtime.error == "" else EXIT_FAILURE
     finally:
-        signals.restore()
+        if not getattr(args, "process", False):  # called in-process (tests): give the caller its handlers back
+            signals.restore()
 
 
 def _retain_refused(error: RetainError) -> int:
