@@ -203,7 +203,7 @@ class Runtime:
         if self._retain_enabled:
             self._load_retained()
         # Watching from before the first setup(): one that blocks at start-up is named too.
-        self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after())
+        self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after(), simulated=self.clock.simulated)
         self._stall_detector.start()
         self.engine.start_programs()
         self._apply_stall()
