@@ -23,7 +23,7 @@ from typing import Any
 
 from softplc.audit.commands import parse_time as parse_absolute
 from softplc.commands import CommandRefused
-from softplc.opcua.login import LoginError, add_login_arguments, login_from_args
+from softplc.opcua.login import LoginError, add_login_arguments, endpoint_url, login_from_args
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
 TABLE_LIMIT = 100  # rows a table shows unless --limit says otherwise (csv and json: every row)
@@ -65,7 +65,7 @@ def add_commands(subparsers: Any) -> None:
     store.add_argument("--sim", action="store_true", help="the trail of the last `softplc run --sim` (simulated time: "
                        "--since 10s counts back from its last entry)")
     store.add_argument("--plant", metavar="NAME", help="plant (runtime) name in a shared store, * for all (default CONFIG's)")
-    audit.add_argument("--endpoint", metavar="URL", help="ask the runtime serving OPC UA at URL instead (audit.query, engineers only)")
+    audit.add_argument("--endpoint", metavar="URL", type=endpoint_url, help="ask the runtime serving OPC UA at URL instead (audit.query, engineers only)")
     add_login_arguments(audit, endpoint=False, user_help="; with --endpoint")
     audit.set_defaults(func=cmd_audit)
 
