@@ -28,6 +28,7 @@ class Write:
     program: str
     variable: str
     path: tuple[Any, ...]
+    instance: tuple[str, str] | None = None  # (template, instance) of a `for_each` program
 
 
 class ProgramChecker:
@@ -83,7 +84,7 @@ class ProgramChecker:
                         findings.problem(where, f"'{var}' of program '{name}' is bound to a missing tag '{tag}'{did_you_mean(tag, self.tags.tags)}", instance=instance)
                     ok = False
                 elif cls is not None and variables[var].direction.writes:
-                    writes.append(Write(tag, name, var, where))
+                    writes.append(Write(tag, name, var, where, instance))
                 resolved.append(tag)
             bindings[var] = resolved[0] if isinstance(target, str) else resolved
         if cls is not None:
