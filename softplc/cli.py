@@ -26,6 +26,7 @@ from softplc.config import PlantConfig, load_config
 from softplc.console import print_table
 from softplc.durations import format_duration
 from softplc.expression import Condition, ExpressionError
+from softplc.plurals import plural
 from softplc.sections import editor_schema
 from softplc.yamlsource import ConfigError
 
@@ -158,7 +159,7 @@ def _print_problems(error: ConfigError, stream: TextIO | None = None) -> None:
     for problem in error.problems:
         print(problem, file=stream)
     count = len(error.problems)
-    print(f"{count} problem{'s' if count != 1 else ''} found", file=stream)
+    print(f"{plural(count, 'problem')} found", file=stream)
 
 
 # -- check / tags / schema ------------------------------------------------------------------
@@ -181,7 +182,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def summary(config: PlantConfig) -> str:
     tasks = ", ".join(f"{task.name} {format_duration(task.interval)}" for task in config.tasks) or "none"
-    return f"{len(config.tags)} tags, {len(config.tasks)} tasks ({tasks}), {config.program_count} programs"
+    return f"{plural(len(config.tags), 'tag')}, {plural(len(config.tasks), 'task')} ({tasks}), {plural(config.program_count, 'program')}"
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
@@ -377,7 +378,7 @@ def status_line(runtime: Any) -> str:
     parts = [f"{runtime.state.value}", f"t={runtime.clock.now():9.1f}s"]
     for task in runtime.tasks:
         stats = task.stats
-        parts.append(f"{task.name}: {stats.cycles} cycles, {stats.overruns} overruns")
+        parts.append(f"{task.name}: {plural(stats.cycles, 'cycle')}, {plural(stats.overruns, 'overrun')}")
     faulted = [i.name for t in runtime.tasks for i in t.programs if i.state.value == "FAULTED"]
     if faulted:
         parts.append("FAULTED: " + ", ".join(faulted))

@@ -259,8 +259,8 @@ class Runtime:
         await self._cancel_background()
         self._apply_accepted_writes()
         if self.db.forces:
-            log.warning("%d forced tag(s) released by the stop (forces are not retained): %s",
-                        len(self.db.forces), ", ".join(force.tag for force in self.db.forces.active()))
+            log.warning("%s released by the stop (forces are not retained): %s",
+                        plural(len(self.db.forces), "forced tag"), ", ".join(force.tag for force in self.db.forces.active()))
         self._flush_retained()
         if self._retain is not None:
             self._retain.close()
@@ -370,7 +370,7 @@ class Runtime:
                             value, tag.name, type_name, rejected.rule.value, rejected.detail, tag.name, tag.definition.initial)
         self.db.commit(values)
         if values:
-            log.info("restored %d retained tag values from %s", len(values), self._retain.path)
+            log.info("restored %s from %s", plural(len(values), "retained tag value"), self._retain.path)
         self.db.on_change(self._note_retained)
 
     def _note_retained(self, changed: Any) -> None:

@@ -24,6 +24,7 @@ from typing import Any
 from softplc.audit.commands import parse_time as parse_absolute
 from softplc.commands import CommandRefused
 from softplc.opcua.login import LoginError, add_login_arguments, endpoint_url, login_from_args
+from softplc.plurals import plural
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
 TABLE_LIMIT = 100  # rows a table shows unless --limit says otherwise (csv and json: every row)
@@ -234,7 +235,7 @@ def _show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> None:
         if args.output:
             stream.close()
     if args.output:
-        print(f"wrote {len(rows)} audit entries to {args.output}", file=sys.stderr)
+        print(f"wrote {plural(len(rows), 'audit entry', 'audit entries')} to {args.output}", file=sys.stderr)
     elif not rows:
         print("no audit entries match", file=sys.stderr)
 

@@ -21,6 +21,7 @@ from softplc.history.queries import HistoryReader
 from softplc.history.settings import HistorySettings, TagPolicy
 from softplc.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.history.swinging_door import SwingingDoor
+from softplc.plurals import plural
 from softplc.realtime import shorten_switch_interval
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.tags import Quality, Tag
@@ -173,7 +174,7 @@ class HistoryRecorder:
         where = self.storage.describe() if self.storage else "?"
         sim = " (simulated time)" if self._runtime is not None and self._runtime.clock.simulated else ""
         period = self.storage.flush_period if self.storage else 0.0
-        return f"history: recording {len(self.filters)} tags to {where}{sim}, flushed every {period:g} s"
+        return f"history: recording {plural(len(self.filters), 'tag')} to {where}{sim}, flushed every {period:g} s"
 
     def metrics(self) -> dict[str, Any]:
         """Figures for /metrics (softplc/metrics/catalog.py): rows written, the queue's depth, drops, failed commits."""

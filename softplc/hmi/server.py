@@ -37,6 +37,7 @@ from softplc.hmi.supervisory import add_supervisory
 from softplc.hmi.views import View, load_views
 from softplc.hmi.writelog import WriteLog
 from softplc.logins import PasswordLogins
+from softplc.plurals import plural
 from softplc.users import UserStore
 from softplc.yamlsource import ConfigError
 
@@ -152,7 +153,7 @@ class HmiServer:
         users = self.sessions.users if self._runner is not None else None
         count = len(users.entries()) if users is not None else 0
         where = users.path if users is not None else "users file"
-        return f"HMI on {self.url or settings.host} (open it in a browser; {anonymous}; {count} users in {where})"
+        return f"HMI on {self.url or settings.host} (open it in a browser; {anonymous}; {plural(count, 'user')} in {where})"
 
     # -- parts of start -------------------------------------------------------------------------
 
