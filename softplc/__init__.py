@@ -25,8 +25,6 @@ _MODULES = {
 }
 __getattr__, __dir__ = lazy_exports(__name__, _MODULES)
 
-
-
 __all__ = [
     "Access", "Clock", "CTD", "CTU", "DataType", "F_TRIG", "InOut", "Input", "Output", "Param",
     "Program", "Quality", "R_TRIG", "RealClock", "SimClock", "TagDef", "TOF", "TON", "TP",
