@@ -11,6 +11,6 @@ def check_lengths(program: Program, *names: str) -> int:
     expected = lengths[names[0]]
     for name, length in lengths.items():
         if length != expected:
-            raise ValueError(f"'{name}' is bound to {length} tags but '{names[0]}' to {expected}: "
+            raise ValueError(f"'{name}' is bound to {length} tag{'' if length == 1 else 's'} but '{names[0]}' to {expected}: "
                              "bind one tag per task (or per robot) to each, in the same order")
     return expected

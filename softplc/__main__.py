@@ -1,5 +1,5 @@
 """`python -m softplc ARGS`: the same as the `softplc` command."""
 
-from softplc.app.cli import main
+from softplc.app.entry_point import main
 
 raise SystemExit(main())

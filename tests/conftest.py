@@ -51,16 +51,13 @@ def postgres_server():
     Skipped with the reason when the server binaries are missing, except under CI (CI=true),
     where scripts/install-test-tools.sh must have installed them: there it fails.
     """
-    import os
-
     from tests.postgres_server import PostgresServer, PostgresUnavailable
+    from tests.tools_support import missing
 
     try:
         server = PostgresServer()
     except PostgresUnavailable as error:
-        if os.environ.get("CI"):
-            raise
-        pytest.skip(str(error))
+        missing(str(error))
     server.start()
     try:
         yield server

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import Any
 
 from softplc import InOut, Input, Output, Param, Program
@@ -134,6 +135,24 @@ class Blocker(Program):
     def scan(self) -> None:
         if self.armed and not (self.once and self.done):
             time.sleep(self.block)
+            self.done += 1
+
+
+class CpuBurner(Program):
+    """Computes for `burn` seconds of its own thread's CPU time in one scan, after touching `marker`."""
+
+    armed = Input("burn while true")
+    done = InOut("burning scans finished")
+    burn = Param(0.3, "seconds of CPU time to burn in one scan")
+    marker = Param("", "a file created as the burning scan begins (empty: none)")
+
+    def scan(self) -> None:
+        if self.armed and not self.done:
+            if self.marker:
+                Path(self.marker).touch()
+            end = time.thread_time() + self.burn
+            while time.thread_time() < end:
+                pass
             self.done += 1
 
 

@@ -266,6 +266,14 @@ def chromium_available() -> bool:
     return Path(CHROMIUM).exists() and shutil.which("chromium") is not None
 
 
+def playwright_available() -> bool:
+    try:
+        import playwright.async_api  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def http_client() -> aiohttp.ClientSession:
     """An HTTP client that keeps its cookies (the session) as a browser would."""
     # unsafe=True: aiohttp's cookie jar ignores cookies of IP-address hosts (127.0.0.1) otherwise.

@@ -30,6 +30,7 @@ from softplc.util.durations import format_duration
 from softplc.core.expression import Condition, ExpressionError
 from softplc.config.sections import editor_schema
 from softplc.config.yamlsource import ConfigError
+from softplc.util.plurals import plural
 
 if TYPE_CHECKING:
     from softplc.engine.retain import RetainError
@@ -46,10 +47,13 @@ COMMAND_MODULES: tuple[str, ...] = ("softplc.svm.cli", "softplc.scenarios.cli", 
 log = logging.getLogger("softplc")
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, *, process: bool = False) -> int:
+    """Run one command; `process`: this is the `softplc` process itself (softplc/app/entry_point.py),
+    which keeps ignoring stop signals after `run` until it exits, rather than restoring them."""
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
+        args.process = process
         try:
             logs.configure(logs.options_from_args(args))
         except logs.LogFileError as error:
@@ -159,7 +163,7 @@ def _print_problems(error: ConfigError, stream: TextIO | None = None) -> None:
     for problem in error.problems:
         print(problem, file=stream)
     count = len(error.problems)
-    print(f"{count} problem{'s' if count != 1 else ''} found", file=stream)
+    print(f"{plural(count, 'problem')} found", file=stream)
 
 
 # -- check / tags / schema ------------------------------------------------------------------
@@ -182,7 +186,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def summary(config: PlantConfig) -> str:
     tasks = ", ".join(f"{task.name} {format_duration(task.interval)}" for task in config.tasks) or "none"
-    return f"{len(config.tags)} tags, {len(config.tasks)} tasks ({tasks}), {config.program_count} programs"
+    return f"{plural(len(config.tags), 'tag')}, {plural(len(config.tasks), 'task')} ({tasks}), {plural(config.program_count, 'program')}"
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
@@ -334,7 +338,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             return EXIT_OK
         return EXIT_OK if runtime.error == "" else EXIT_FAILURE
     finally:
-        signals.restore()
+        if not getattr(args, "process", False):  # called in-process (tests): give the caller its handlers back
+            signals.restore()
 
 
 def _retain_refused(error: RetainError) -> int:
@@ -378,7 +383,7 @@ def status_line(runtime: Any) -> str:
     parts = [f"{runtime.state.value}", f"t={runtime.clock.now():9.1f}s"]
     for task in runtime.tasks:
         stats = task.stats
-        parts.append(f"{task.name}: {stats.cycles} cycles, {stats.overruns} overruns")
+        parts.append(f"{task.name}: {plural(stats.cycles, 'cycle')}, {plural(stats.overruns, 'overrun')}")
     faulted = [i.name for t in runtime.tasks for i in t.programs if i.state.value == "FAULTED"]
     if faulted:
         parts.append("FAULTED: " + ", ".join(faulted))

@@ -27,6 +27,7 @@ from softplc.core.expression import Condition
 from softplc.engine.online_change.change import OnlineChange
 from softplc.core.plant import Adapter, AdapterError
 from softplc.core.program import ProgramContext
+from softplc.util.plurals import plural
 from softplc.engine.program_control import register_program_commands
 from softplc.engine.retain import RetainStore, open_retained
 from softplc.engine.runtime_commands import register_runtime_commands
@@ -199,7 +200,7 @@ class Runtime:
         if self._retain_enabled:
             self._load_retained()
         # Watching from before the first setup(): one that blocks at start-up is named too.
-        self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after())
+        self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after(), simulated=self.clock.simulated)
         self._stall_detector.start()
         self.engine.start_programs()
         self._apply_stall()
@@ -248,10 +249,15 @@ class Runtime:
             self._stall_detector.stop()
         for adapter in reversed(self.adapters):
             await _quietly(adapter.stop(), adapter.name)
+            # Its clients were told their writes were accepted (journaled), up to its very last
+            # answer: apply them now, no scan will, while the adapters still running (historian,
+            # alarms, audit) see them; the last save below keeps the retained ones.
+            self._apply_accepted_writes()
         await self._cancel_background()
+        self._apply_accepted_writes()
         if self.db.forces:
-            log.warning("%d forced tag(s) released by the stop (forces are not retained): %s",
-                        len(self.db.forces), ", ".join(force.tag for force in self.db.forces.active()))
+            log.warning("%s released by the stop (forces are not retained): %s",
+                        plural(len(self.db.forces), "forced tag"), ", ".join(force.tag for force in self.db.forces.active()))
         self._flush_retained()
         if self._retain is not None:
             self._retain.close()
@@ -361,7 +367,7 @@ class Runtime:
                             value, tag.name, type_name, rejected.rule.value, rejected.detail, tag.name, tag.definition.initial)
         self.db.commit(values)
         if values:
-            log.info("restored %d retained tag values from %s", len(values), self._retain.path)
+            log.info("restored %s from %s", plural(len(values), "retained tag value"), self._retain.path)
         self.db.on_change(self._note_retained)
 
     def _note_retained(self, changed: Any) -> None:
@@ -370,6 +376,16 @@ class Runtime:
                 # The value now, on the loop thread: the saving thread never reads a changing tag,
                 # and a force applied later never reaches the store.
                 self._retain_dirty[tag.name] = (tag.definition.type.value, tag.value)
+
+    def _apply_accepted_writes(self) -> None:
+        """At stop: apply the writes still journaled (the scan that would have applied them has ended)."""
+        try:
+            applied = self.db.apply_journal()
+        except Exception:  # a listener's failure must not cost the shutdown (and the save after it)
+            log.exception("applying the writes accepted before the stop failed")
+            return
+        if applied:
+            log.info("stop: %s accepted before the stop applied", plural(applied, "write"))
 
     def _flush_retained(self) -> None:
         """Save retained changes now (at shutdown)."""

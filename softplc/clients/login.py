@@ -142,7 +142,7 @@ def add_login_arguments(
     """Add --endpoint, --config, --namespace and --timeout (unless the command has its own), --user, --password-stdin, --security."""
     group = parser.add_argument_group("connection and login (OPC UA)")
     if endpoint:
-        group.add_argument("--endpoint", metavar="URL",
+        group.add_argument("--endpoint", metavar="URL", type=endpoint_url,
                            help=f"the runtime's OPC UA endpoint (default: servers.opcua.endpoint of --config, else {DEFAULT_ENDPOINT})")
         group.add_argument("--config", metavar="FILE",
                            help=f"the plant's configuration, for its endpoint and namespace (default {DEFAULT_CONFIG} if there is one here)")
@@ -160,6 +160,32 @@ def add_login_arguments(
         group.add_argument("--timeout", type=_seconds, default=timeout_default, metavar="S",
                            help=f"seconds to wait for each answer (default {timeout_default:g})")
     parser.set_defaults(password_env=password_env, login_config=endpoint)  # login_config: --config is ours (not, e.g., audit's)
+
+
+def endpoint_url(text: str) -> str:
+    """An `--endpoint` argument: opc.tcp://HOST[:PORT][/PATH], else argparse's error saying what is wrong."""
+    from urllib.parse import urlsplit
+
+    url = text.strip()
+    parts = urlsplit(url)
+    problem = None
+    if "://" not in url:
+        problem = "no scheme"
+    elif parts.scheme.lower() in ("http", "https"):
+        problem = f"{parts.scheme.lower()}:// is the address of a web page (the HMI), not of an OPC UA server"
+    elif parts.scheme.lower() != "opc.tcp":
+        problem = f"the scheme is {parts.scheme}://"
+    elif not parts.hostname:
+        problem = "no host"
+    else:
+        try:
+            parts.port  # noqa: B018 — raises for a port that is not a number from 0 to 65535
+        except ValueError:
+            port = parts.netloc.rpartition(":")[2]
+            problem = f"{port!r} is not a port number"
+    if problem is not None:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an OPC UA endpoint ({problem}): write opc.tcp://HOST:PORT/PATH, e.g. {DEFAULT_ENDPOINT}")
+    return url
 
 
 def _seconds(text: str) -> float:

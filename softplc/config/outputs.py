@@ -28,6 +28,7 @@ def check_outputs(findings: Findings, writes: list[Write], shared: set[str]) -> 
             location = findings.source.value(write.path)
             described.append(f"'{write.program}' (its output '{write.variable}'" + ("" if location == here else f", at {location}") + ")")
         listed = ", ".join(described[:-1]) + " and " + described[-1]
+        # Found for a `for_each` instance: said once for all the instances with the same mistake.
         findings.problem(found[1].path, f"'{tag}' is written by {len(found)} programs, {listed}: the one that runs last "
                          "overrides the others (the double-coil bug); let one program write it, or declare the tag with "
-                         "shared_output: true if they take turns on purpose")
+                         "shared_output: true if they take turns on purpose", instance=found[1].instance)

@@ -28,6 +28,7 @@ class Write:
     program: str
     variable: str
     path: tuple[Any, ...]
+    instance: tuple[str, str] | None = None  # (template, instance) of a `for_each` program
 
 
 class ProgramChecker:
@@ -83,7 +84,7 @@ class ProgramChecker:
                         findings.problem(where, f"'{var}' of program '{name}' is bound to a missing tag '{tag}'{did_you_mean(tag, self.tags.tags)}", instance=instance)
                     ok = False
                 elif cls is not None and variables[var].direction.writes:
-                    writes.append(Write(tag, name, var, where))
+                    writes.append(Write(tag, name, var, where, instance))
                 resolved.append(tag)
             bindings[var] = resolved[0] if isinstance(target, str) else resolved
         if cls is not None:
@@ -164,8 +165,8 @@ def import_program(reference: str, base_dir: Path, load_module: ModuleLoader | N
             raise ImportError(f"cannot load program '{reference}': no module named '{missing}' in {where}") from None
         # The program's module exists, but something it imports does not.
         raise ImportError(f"cannot load program '{reference}': module {module_name} imports '{missing}', which is not installed") from None
-    except SyntaxError as error:  # its message names the file and line already
-        raise ImportError(f"cannot load program '{reference}': SyntaxError: {error}") from None
+    except SyntaxError as error:  # IndentationError and TabError too
+        raise ImportError(f"cannot load program '{reference}': {syntax_error_at(error)}") from None
     except Exception as error:  # user code may raise anything while importing
         raise ImportError(f"cannot load program '{reference}': {type(error).__name__}: {error}{raised_at(error)}") from None
     cls = getattr(module, class_name, None)
@@ -196,6 +197,14 @@ def importable(base_dir: Path) -> None:
     base = str(base_dir.resolve())
     if base not in sys.path:
         sys.path.insert(0, base)
+
+
+def syntax_error_at(error: SyntaxError) -> str:
+    """'PATH:LINE:COL: SyntaxError: message' (the whole path, as editors and terminals link it)."""
+    where = ""
+    if error.filename:
+        where = f"{Path(error.filename).resolve()}:{error.lineno or 1}" + (f":{error.offset}" if error.offset else "") + ": "
+    return f"{where}{type(error).__name__}: {error.msg}"
 
 
 def raised_at(error: BaseException) -> str:

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from softplc.config.yamlsource import Problem
 
 NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
-NAME_RULE = "letters, digits and _, not starting with a digit"
+NAME_RULE = "ASCII letters, digits and _, not starting with a digit"
 
 DURATION: dict[str, Any] = {
     "description": "A duration: 10ms, 1s, 2min, 250us, or a number of seconds.",

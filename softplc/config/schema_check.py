@@ -27,6 +27,15 @@ def describe(value: Any) -> str:
     return "null" if value is None else type(value).__name__
 
 
+RESERVED_TAG_PREFIX = "_sys"  # system tags' names (softplc/config/tags.py refuses '_sys_x' the same way)
+
+
+def _names_a_tag(path: tuple[Any, ...] | list[Any]) -> bool:
+    """Whether `path` is a tag's key: tags.NAME or templates.T.tags.NAME."""
+    path = tuple(path)
+    return (len(path) == 2 and path[0] == "tags") or (len(path) == 4 and path[0] == "templates" and path[2] == "tags")
+
+
 _TYPE_WORDS = {"object": "a mapping", "array": "a list", "string": "a string", "number": "a number",
                "integer": "an integer", "boolean": "true or false", "null": "null"}
 
@@ -101,6 +110,9 @@ def _translate(error: jsonschema.ValidationError, path: tuple[Any, ...], source:
         return [source.problem(path, f"{where} must be {expected_words}, not {describe(error.instance)}")]
     if kind == "pattern":
         is_key = "propertyNames" in error.absolute_schema_path
+        if is_key and _names_a_tag(path) and str(error.instance).startswith(RESERVED_TAG_PREFIX):
+            # '_sys.state' is a system tag's very name: reserved, as '_sys_state' is (softplc/config/tags.py).
+            return [source.problem(path, f"tag names starting with '{RESERVED_TAG_PREFIX}' are reserved for system tags: '{error.instance}'", at_key=True)]
         return [source.problem(path, f"invalid name '{error.instance}' ({NAME_RULE})", at_key=is_key)]
     if kind == "const":
         return [source.problem(path, f"{where} must be {error.validator_value!r}, not {describe(error.instance)}")]

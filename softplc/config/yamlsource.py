@@ -120,12 +120,27 @@ def load_yaml(path: str | Path) -> tuple[Any, SourceMap]:
     return parse_yaml(text, file)
 
 
+def _indenting_tab(text: str, line_index: int) -> tuple[int, int] | None:
+    """(line, column), 1-based, of a tab in the indentation of line `line_index` (0-based), or None."""
+    lines = text.splitlines()
+    if not 0 <= line_index < len(lines):
+        return None
+    line = lines[line_index]
+    indentation = line[: len(line) - len(line.lstrip(" \t"))]
+    return (line_index + 1, indentation.index("\t") + 1) if "\t" in indentation else None
+
+
 def parse_yaml(text: str, file: str = "<string>") -> tuple[Any, SourceMap]:
     """Parse YAML text (see `load_yaml`)."""
     try:
         node = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.MarkedYAMLError as error:
         mark = error.problem_mark or error.context_mark
+        tab = _indenting_tab(text, mark.line) if mark else None
+        if tab is not None or "'\\t'" in (error.problem or ""):
+            # PyYAML's words ("found character '\\t' that cannot start any token") name no cure.
+            line, column = tab if tab is not None else (mark.line + 1, mark.column + 1)
+            raise ConfigError([Problem(Location(file, line, column), "tabs are not allowed for indentation; use spaces")]) from None
         location = _location(file, mark) if mark else Location(file, 1, 1)
         message = error.problem or str(error)
         if error.context:

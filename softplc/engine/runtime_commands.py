@@ -15,6 +15,7 @@ from typing import Any, Protocol
 
 from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.core.datatypes import TypeMismatch
+from softplc.util.plurals import plural
 from softplc.engine.scan import ProgramState, Task
 from softplc.core.tagdb import Origin, TagDatabase, WriteRejected
 
@@ -35,7 +36,7 @@ def register_runtime_commands(runtime: _Runtime) -> None:
     def reset_faults(arguments: Mapping[str, Any], origin: Origin) -> str:
         faulted = [i.name for t in runtime.tasks for i in t.programs if i.state is ProgramState.FAULTED]
         runtime.reset_faults()
-        return f"reset {len(faulted)} faulted program(s)" + (f": {', '.join(faulted)}" if faulted else "")
+        return f"reset {plural(len(faulted), 'faulted program')}" + (f": {', '.join(faulted)}" if faulted else "")
 
     def force(arguments: Mapping[str, Any], origin: Origin) -> str:
         name = _tag_argument(arguments)

@@ -150,7 +150,8 @@ class CurrentScan:
     """The cycle (or out-of-cycle setup) under way; read by the stall detector from another thread."""
 
     task: Task
-    real_start: float
+    real_start: float  # time.monotonic() as it began
+    cpu_start: float  # time.thread_time() of the loop's thread as it began (judged under a simulated clock)
 
 
 class ScanEngine:
@@ -188,7 +189,7 @@ class ScanEngine:
 
     def run_setup(self, task: Task, instance: ProgramInstance, setup: Callable[[], None]) -> None:
         """Run `setup` (a program's start or reset) outside a cycle, seen by the stall detector as that program's."""
-        self.current = CurrentScan(task, time.monotonic())
+        self.current = CurrentScan(task, time.monotonic(), time.thread_time())
         task.running_program = instance.name
         task.running_setup = True
         try:
@@ -232,7 +233,7 @@ class ScanEngine:
     def cycle(self, task: Task, release: float) -> None:
         clock = self.clock
         start = clock.now()
-        self.current = CurrentScan(task, time.monotonic())
+        self.current = CurrentScan(task, time.monotonic(), time.thread_time())
         try:
             self.db.apply_journal()
             task.run_cycle(self.db, start)

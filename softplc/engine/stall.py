@@ -5,6 +5,15 @@ every protocol served by the same event loop. The detector runs outside the loop
 still report: it logs the task, the program and where it is stuck, and puts the runtime into
 its ERROR state. When the scan finally returns, the program is faulted. A program's setup()
 run outside a cycle (at start-up, or by an operator's reset) is watched the same way.
+
+What "too long" means depends on the clock:
+- Real time: wall time. Whatever held the loop, nothing was served meanwhile.
+- Simulated time: a slow scan costs no simulated time, only a slower run, and wall time there
+  mostly measures the machine (a busy CI host, a paused VM stalled a scenario for 1.5 s in the
+  middle of a scan and failed it). So a simulated run judges the CPU time the loop's thread spent
+  in the scan — a program computing past the limit is stuck on any machine, one paused by the
+  machine never is — and a scan blocked without computing (a sleep, a hung socket) only past
+  `SIMULATED_WALL_LIMIT`, long enough for no machine to reach it by being busy.
 """
 
 from __future__ import annotations
@@ -16,9 +25,11 @@ import time
 import traceback
 from collections.abc import Callable
 
-from softplc.engine.scan import ScanEngine, Task
+from softplc.engine.scan import CurrentScan, ScanEngine, Task
 
 log = logging.getLogger(__name__)
+
+SIMULATED_WALL_LIMIT = 120.0  # seconds of wall time a simulated scan may block without computing
 
 
 class StallDetector:
@@ -29,13 +40,19 @@ class StallDetector:
         *,
         stall_after: float | None = None,
         poll: float = 0.05,
+        simulated: bool = False,
+        wall_limit: float = SIMULATED_WALL_LIMIT,
     ) -> None:
+        """`simulated`: judge by the loop thread's CPU time (and `wall_limit` of wall time), not wall time."""
         self.engine = engine
         self.on_stall = on_stall
         self.stall_after = stall_after
         self.poll = poll
+        self.simulated = simulated
+        self.wall_limit = wall_limit
         self._stop = threading.Event()
         self._loop_thread_id = threading.get_ident()
+        self._loop_cpu_clock = _thread_cpu_clock(self._loop_thread_id) if simulated else None
         self._thread = threading.Thread(target=self._watch, name="softplc-stall-detector", daemon=True)
 
     def limit(self, task: Task) -> float:
@@ -52,6 +69,22 @@ class StallDetector:
         if self._thread.is_alive():
             self._thread.join(timeout=1.0)
 
+    def _blocked(self, current: CurrentScan) -> tuple[float, str] | None:
+        """(how long, in what) the scan under way has blocked past its limit, else None."""
+        wall = time.monotonic() - current.real_start
+        limit = self.limit(current.task)
+        if not self.simulated:
+            return (wall, "s") if wall >= limit else None
+        if self._loop_cpu_clock is not None:
+            computed = time.clock_gettime(self._loop_cpu_clock) - current.cpu_start
+            if computed >= limit:
+                return computed, "s of CPU time"
+        elif wall >= limit:  # no per-thread CPU clock on this system: wall time, as in real time
+            return wall, "s"
+        if wall >= max(self.wall_limit, limit):
+            return wall, "s of wall time without computing (simulated clock)"
+        return None
+
     def _watch(self) -> None:
         reported_start: float | None = None
         last_report = 0.0
@@ -60,9 +93,8 @@ class StallDetector:
             if current is None:
                 reported_start = None
                 continue
-            blocked = time.monotonic() - current.real_start
-            limit = self.limit(current.task)
-            if blocked < limit:
+            blocked = self._blocked(current)
+            if blocked is None:
                 continue
             now = time.monotonic()
             if reported_start == current.real_start and now - last_report < 5.0:
@@ -74,8 +106,9 @@ class StallDetector:
                 continue  # it returned while we looked: the names may belong to the next cycle
             where = "".join(traceback.format_stack(frame, limit=3)).strip() if frame is not None else "unknown"
             culprit = f"setup() of program {program}" if in_setup else f"program {program or '(between programs)'}"
+            seconds, unit = blocked
             message = (
-                f"task {task.name} is stuck in {culprit} for {blocked:.1f} s "
+                f"task {task.name} is stuck in {culprit} for {seconds:.1f} {unit} "
                 f"(watchdog {task.watchdog * 1e3:g} ms): the event loop is blocked"
             )
             log.error("%s; the runtime is in ERROR state. Stuck at:\n%s", message, where)
@@ -83,3 +116,11 @@ class StallDetector:
                 self.on_stall(task, program, message)
             reported_start = current.real_start
             last_report = now
+
+
+def _thread_cpu_clock(thread_id: int) -> int | None:
+    """The clock of a thread's CPU time (read from any thread), or None where there is none."""
+    try:
+        return time.pthread_getcpuclockid(thread_id)
+    except (AttributeError, OSError):
+        return None

@@ -25,6 +25,7 @@ from typing import Any, Callable, TextIO
 
 from softplc.latency.driver import ROLES, Driver, DriverError, ReadyTracker, Snapshot
 from softplc.latency.endpoint import EndpointError, parse_endpoint
+from softplc.util.plurals import plural
 
 Emit = Callable[[dict[str, Any]], None]
 MAX_CONSECUTIVE_TIMEOUTS = 3
@@ -68,7 +69,7 @@ class HandshakeClient:
                 consecutive += 1
                 self.emit({"type": "timeout", "index": index, "waited": self.timeout, "message": str(error), "t": time.monotonic()})
                 if consecutive >= MAX_CONSECUTIVE_TIMEOUTS:
-                    raise DriverError(f"no new Ready within {self.timeout:g} s, {consecutive} times in a row: "
+                    raise DriverError(f"no new Ready within {self.timeout:g} s, {plural(consecutive, 'time')} in a row: "
                                       "is the PLC running the handshake?") from None
                 continue
             consecutive = 0

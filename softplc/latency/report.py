@@ -18,6 +18,7 @@ from typing import Any, TextIO
 from softplc.latency.results import Measurement, Sample
 from softplc.latency.progress import plural
 from softplc.latency.statistics import DelayStatistics, share_at_most, summarize
+from softplc.util.plurals import plural
 
 # Thesis Table 8: Beckhoff TwinCAT soft-PLC + its OPC server + a Python OPC client, 10 ms scan.
 THESIS_TABLE_8: dict[str, dict[str, float]] = {
@@ -276,7 +277,7 @@ def _print_details(run: Measurement, out: TextIO) -> None:
                 print(f"    {label_text:>13s} ms {count:6d} {100.0 * count / total:6.2f} % {bar}", file=out)
     if run.plc_task:
         latency = run.plc_task["start_latency_ms"]
-        print(f"  PLC task: {run.plc_task['cycles']} cycles, {run.plc_task['overruns']} overruns, start latency mean "
+        print(f"  PLC task: {plural(run.plc_task['cycles'], 'cycle')}, {plural(run.plc_task['overruns'], 'overrun')}, start latency mean "
               f"{latency['mean']:.3f} / p99 {latency['p99']:.3f} / max {latency['max']:.3f} ms", file=out)
     c = run.conditions
     cpu = ""

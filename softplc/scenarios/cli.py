@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from softplc.util.plurals import plural
 from softplc.scenarios.spec import DISPATCHERS, STOPS, builtin_scenarios, find_scenario, load_scenario
 from softplc.config.yamlsource import ConfigError
 
@@ -133,7 +134,7 @@ def text_summary(summary: dict) -> str:  # type: ignore[type-arg]
     lines.append(f"  goals per task: {goals}")
     for robot, record in summary["robots"].items():
         trips = ", ".join(f"{task} {count}" for task, count in record["trips"].items()) or "none"
-        failed = f"; navigation FAILED {record['navigation_failures']} times" if record["navigation_failures"] else ""
+        failed = f"; navigation FAILED {plural(record['navigation_failures'], 'time')}" if record["navigation_failures"] else ""
         stuck = f"; stuck {record['stuck_s']:.0f} s (longest {record['longest_stuck_s']:.0f} s)" if record["stuck_s"] >= 0.5 else ""
         lines.append(f"  {robot}: trips {trips}; idle {record['idle_s']:.0f} s{stuck}; utilisation {100 * record['utilisation']:.0f} %{failed}")
     levels = ", ".join(f"{task} in {v['in']:.0f} % / out {v['out']:.0f} %" for task, v in summary["levels_at_end"].items())

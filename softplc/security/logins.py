@@ -113,6 +113,25 @@ class LoginThrottle:
         return len(times)
 
 
+def _is_text(value: str) -> bool:
+    """Whether `value` is valid Unicode text (no lone surrogates: it encodes to UTF-8)."""
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+def _shown(name: str, limit: int = 64) -> str:
+    """A client's user name for a log line: undecodable bytes as \\xNN, at most `limit` characters."""
+    try:
+        raw = name.encode("utf-8", "surrogateescape")  # the bytes the client sent, when asyncua decoded them
+    except UnicodeEncodeError:
+        raw = name.encode("utf-8", "backslashreplace")  # lone surrogates of another origin (JSON \udXXX)
+    shown = raw.decode("utf-8", "backslashreplace")
+    return "'" + (shown if len(shown) <= limit else shown[:limit] + "…") + "'"
+
+
 class PasswordLogins:
     """Decides password logins against a UserStore, off the event loop (see the module docstring)."""
 
@@ -139,6 +158,13 @@ class PasswordLogins:
 
     async def check(self, peer: str, name: str, password: str) -> bool:
         """Whether `name`/`password` from address `peer` may log in; hashes in the worker thread."""
+        if not (_is_text(name) and _is_text(password)):
+            # Bytes that are not UTF-8 (an OPC UA String decoded with surrogateescape) or lone
+            # surrogates (JSON): nobody's name or password. Refused before hashing or throttling,
+            # and said once per peer and interval however often it is sent.
+            self.peer_log.warning(peer, "logins not in UTF-8", "%s: login from %s refused: its user name or password is not valid UTF-8 (user name %s)",
+                                  self.service, peer, _shown(name), detail=_shown(name))
+            return False
         self.store.refresh()
         if self.decided(name, password) is not None:
             return True

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
+from softplc.util.plurals import plural
 from softplc.svm.dataset import (
     RULES,
     DatasetError,
@@ -110,7 +111,7 @@ def cmd_label(args: argparse.Namespace) -> int:
         with open(args.file, "a" if args.append else "w") as file:
             file.write(text)
         counts = ", ".join(f"task {task + 1}: {dataset.labels.count(task)}" for task in range(len(ranges)))
-        print(f"{args.file}: {len(dataset)} samples labelled by rule '{args.rule}' ({counts})")
+        print(f"{args.file}: {plural(len(dataset), 'sample')} labelled by rule '{args.rule}' ({counts})")
         return EXIT_OK
     if not sys.stdin.isatty():
         print("softplc svm label: interactive labelling needs a terminal; use --rule for scripted labelling", file=sys.stderr)
@@ -138,7 +139,7 @@ def _interactive(path: Path, ranges: list[tuple[int, int]], rng: random.Random, 
             print(f"assign to task [{choices}/q]: ", end="", file=stdout, flush=True)
             answer = stdin.readline()
             if not answer or answer.strip().lower() in ("q", "quit"):
-                print(f"\n{count} samples added to {path}", file=stdout)
+                print(f"\n{plural(count, 'sample')} added to {path}", file=stdout)
                 return EXIT_OK
             if answer.strip().isdigit() and 1 <= int(answer) <= tasks:
                 break
@@ -159,7 +160,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     model.save(json_path)
     save_estimator(fitted, joblib_path)
     counts = ", ".join(f"task {int(label) + 1}: {n}" for label, n in model.class_counts.items())
-    print(f"{args.file}: {model.samples} samples ({counts}), features {', '.join(model.features)}")
+    print(f"{args.file}: {plural(model.samples, 'sample')} ({counts}), features {', '.join(model.features)}")
     print(f"model: {model.estimator} linear, C = {model.C:g}")
     print(f"training accuracy:        {model.train_accuracy:.3f}")
     if model.cv_folds:

@@ -13,6 +13,8 @@ import logging
 from dataclasses import dataclass, field
 from typing import Any
 
+from softplc.util.plurals import counted
+
 DEFAULT_INTERVAL = 10.0
 
 
@@ -68,8 +70,8 @@ class PeerLog:
             return
         peer, kind = key
         details = f" ({', '.join(quiet.details)})" if quiet.details else ""
-        self.logger.warning("%s: %d more %s from %s in the last %.0f s%s",
-                            self.service, quiet.count, kind, peer, self.interval, details)
+        self.logger.warning("%s: %s from %s in the last %.0f s%s",
+                            self.service, counted(quiet.count, f"more {kind}"), peer, self.interval, details)
         # Still flooding: stay quiet for another interval, so a steady flood writes one line per interval.
         self._quiet[key] = _Quiet()
         asyncio.get_running_loop().call_later(self.interval, self._summarise, key)

@@ -3,14 +3,18 @@ way always finishes (a second signal is ignored), and the exit statuses of docs/
 
 from __future__ import annotations
 
+import re
 import signal
 import sqlite3
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from conftest import REPO
-from test_cli import Process, statistics
+from test_cli import FREE_PORTS, SOFTPLC, Process, statistics
 
 CORE = REPO / "tests" / "core_programs.py"
 
@@ -121,3 +125,72 @@ def test_a_run_that_ends_by_itself_in_error_exits_1(tmp_path: Path) -> None:
     assert code == 1, output
     assert "stopped: duration of 1.5 s reached" in output
     assert "softplc: the runtime was in ERROR when it stopped: task fast is stuck in program block for " in output
+
+
+# A second signal at these delays after the first: the shutdown may be done by then, with the
+# interpreter still exiting (threads joined, files closed); the process must not die of it.
+SECOND_SIGNAL_DELAYS = (0.05, 0.2, 0.5)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_a_second_signal_soon_after_the_first_never_kills_the_process(tmp_path: Path, signum: int) -> None:
+    for delay in SECOND_SIGNAL_DELAYS:
+        folder = tmp_path / f"after-{delay}"
+        folder.mkdir()
+        process = start(folder, COUNTING, *FREE_PORTS)
+        try:
+            process.wait_for("press Ctrl-C to stop", timeout=60)
+            process.popen.send_signal(signum)
+            time.sleep(delay)  # the delay under test (not a wait for a condition)
+            process.popen.send_signal(signum)
+            code = process.finish(timeout=60)
+        finally:
+            process.kill()
+        output = "\n".join(process.lines)
+        assert code == 0, f"second {signal.Signals(signum).name} {delay} s after the first: exit status {code}\n{output}"
+        assert "Traceback" not in output
+        assert sum("received while stopping" in line for line in process.lines) <= 1, output
+
+
+def _softplc_imported(process: subprocess.Popen[str], lines: list[str], timeout: float = 60) -> None:
+    """Wait until the package `softplc` is imported: softplc's own code runs from here (before it,
+    Python's start-up reports a Ctrl-C itself, e.g. "Failed checking if argv[0] is an import path entry")."""
+    assert process.stderr is not None
+    deadline = time.monotonic() + timeout
+    for line in process.stderr:
+        lines.append(line)
+        if line.startswith("import time:") and re.search(r"\|\s+softplc$", line.rstrip()):
+            return
+        assert time.monotonic() < deadline, "Python did not start"
+    raise AssertionError(f"the process ended during start-up: {lines}")
+
+
+# From 20 ms after the package is imported: before that, the console script pip wrote is still
+# on its own first line (a re.sub) before it calls softplc.main, and a Ctrl-C there is Python's.
+@pytest.mark.parametrize("delay", [0.02, 0.05, 0.1, 0.2, 0.4])
+def test_ctrl_c_while_softplc_is_starting_exits_quietly(tmp_path: Path, delay: float) -> None:
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(COUNTING)
+    # -X importtime tells when the package is imported: the Ctrl-C lands in softplc's own start
+    # (imports, the configuration, the runtime starting), `delay` seconds later.
+    process = subprocess.Popen(
+        [sys.executable, "-X", "importtime", SOFTPLC, "run", str(plant), "--no-status", "--no-servers", "--state-dir", str(tmp_path / "state")],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    lines: list[str] = []
+    try:
+        _softplc_imported(process, lines)
+        time.sleep(delay)  # the delay under test
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    output = "".join(lines) + out + err
+    messages = "\n".join(line for line in output.splitlines() if not line.startswith("import time:"))
+    assert "Traceback" not in messages and "KeyboardInterrupt" not in messages, messages
+    # Before `run` takes over the signals: 130; after, a clean stop as soon as it has started: 0.
+    assert process.returncode in (130, 0), f"exit status {process.returncode}\n{messages}"
+    if process.returncode == 0:
+        assert "stopped: interrupted (SIGINT, Ctrl-C)" in messages, messages

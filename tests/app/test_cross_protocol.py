@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 import textwrap
 import time
 from pathlib import Path
@@ -19,6 +20,7 @@ from softplc.adapters.modbus.server import ModbusAdapter
 from softplc.adapters.modbus.settings import ModbusSettings
 from softplc.adapters.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.app.runtime import Runtime
+from softplc.core.tagdb import Origin
 
 PLANT = """
 version: 1
@@ -161,3 +163,24 @@ async def test_an_opc_ua_write_is_read_over_modbus_and_rules_agree(plant):
     assert response.isError() and response.exception_code == 3
     await next_cycles(runtime)
     assert runtime.db.value("setpoint") != 5000.0
+
+
+async def test_a_forced_tag_refuses_writes_over_both_protocols_with_their_own_code_and_no_traceback(plant, caplog):
+    runtime, modbus, opcua, mb, ua_client = plant
+    engineer = Origin("test", "engineer", role=Role.ENGINEER)
+    await runtime.commands.call("tags.force", {"tag": "request", "value": 7}, engineer)
+    await next_cycles(runtime)
+    assert runtime.db["request"].forced
+    caplog.clear()
+    try:
+        for _ in range(3):  # each refusal alike: no KeyError, no server failure (04), no traceback
+            response = await mb.write_registers(modbus.map.by_tag["request"].address, words_of("i", 99))
+            assert response.isError() and response.exception_code == 2  # docs/modbus.md: forced → 02
+        with pytest.raises(ua.UaStatusCodeError) as refused:
+            await ua_client.get_node(opcua.node_id("request")).write_value(ua.DataValue(ua.Variant(99, ua.VariantType.Int32)))
+        assert refused.value.code == ua.StatusCodes.BadLocked
+        await next_cycles(runtime)
+        assert runtime.db.value("request") == 7
+    finally:
+        await runtime.commands.call("tags.unforce", {"tag": "request"}, engineer)
+    assert not [record for record in caplog.records if record.exc_info or record.levelno >= logging.ERROR]

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from tools_support import missing
+
 from softplc.app.cli import build_parser, cmd_run
 from tests.conftest import REPO
 
@@ -25,8 +27,9 @@ def unit() -> configparser.ConfigParser:
     return parser
 
 
-@pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze is not installed")
 def test_systemd_analyze_verifies_the_unit(tmp_path: Path) -> None:
+    if shutil.which("systemd-analyze") is None:
+        missing("systemd-analyze is not installed (Debian's systemd package; scripts/install-test-tools.sh)")
     # verify checks that ExecStart's program exists: point it at this checkout's softplc.
     installed = tmp_path / "softplc.service"
     installed.write_text(UNIT.read_text().replace(INSTALLED, str(Path(sys.executable).parent / "softplc")))

@@ -115,7 +115,7 @@ async def test_forces_do_not_survive_a_restart_and_are_never_retained(make_confi
     await runtime.clock.sleep_until(0.2)
     assert runtime.db.value("count") == 999
     await runtime.stop()
-    assert "1 forced tag(s) released by the stop (forces are not retained): count" in caplog.text
+    assert "1 forced tag released by the stop (forces are not retained): count" in caplog.text
     again = build(make_config, state)
     await again.start()
     try:

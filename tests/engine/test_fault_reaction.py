@@ -214,7 +214,7 @@ async def test_reset_faults_makes_no_false_edge_for_a_signal_high_across_the_fau
         db.submit([("armed", False)], "test")
         await clock.sleep_until(0.2)
         done = await runtime.commands.call("runtime.reset_faults", {}, Origin("hmi", "otto", role=Role.OPERATOR))
-        assert done == "reset 1 faulted program(s): counter"
+        assert done == "reset 1 faulted program: counter"
         await clock.sleep_until(0.5)
         program = runtime.program("counter").program
         assert program.restarted and not program.first_scan

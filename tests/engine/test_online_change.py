@@ -169,8 +169,11 @@ async def test_a_broken_module_is_refused_with_its_location_and_nothing_is_appli
     with pytest.raises(ChangeRefused) as refused:
         await plant.apply()
     message = str(refused.value)
-    assert message.startswith("online change refused, nothing applied: 1 problem(s):\n")
-    assert f"  {plant.program_at()}: cannot load program '{plant.module}:Mixer': SyntaxError: invalid syntax ({plant.module}.py, line" in message
+    assert message.startswith("online change refused, nothing applied: 1 problem:\n")
+    # where the code is broken, as PATH:LINE:COL (the whole path: the runtime may run elsewhere)
+    line = next(number for number, text in enumerate(plant.file.read_text().splitlines(), 1) if "= = 2" in text)
+    column = plant.file.read_text().splitlines()[line - 1].index("= = 2") + 3
+    assert f"  {plant.program_at()}: cannot load program '{plant.module}:Mixer': {plant.file.resolve()}:{line}:{column}: SyntaxError: invalid syntax" in message
     assert refused.value.details["problems"] and refused.value.details["applied"] is False
     await clock.sleep_until(0.1)
     assert runtime.program("mix") is old and runtime.config is config and plant.value("version") == 1

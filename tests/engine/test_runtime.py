@@ -100,7 +100,7 @@ async def test_reset_faults_is_a_command_an_operator_may_call_and_a_viewer_may_n
             await runtime.commands.call("runtime.reset_faults", {}, Origin("hmi", "vera", role=Role.VIEWER))
         assert runtime.program("bomb").state.value == "FAULTED"
         done = await runtime.commands.call("runtime.reset_faults", {}, Origin("hmi", "otto", role=Role.OPERATOR))
-        assert done == "reset 1 faulted program(s): bomb" and runtime.program("bomb").state.value == "RUNNING"
+        assert done == "reset 1 faulted program: bomb" and runtime.program("bomb").state.value == "RUNNING"
         assert [(c.origin.user, c.accepted) for c in calls] == [("vera", False), ("otto", True)]
     finally:
         await runtime.stop()

@@ -161,5 +161,5 @@ async def test_lists_of_different_lengths_fault_the_program_with_a_clear_reason(
     await runtime.run(duration=1)
     instance = runtime.program("plant")
     assert instance.state.value == "FAULTED"
-    assert "'iBC' is bound to 1 tags but 'iBM' to 2" in instance.error
+    assert "'iBC' is bound to 1 tag but 'iBM' to 2" in instance.error
     assert runtime.program("demand").state.value == "RUNNING"  # the rest of the plant keeps scanning

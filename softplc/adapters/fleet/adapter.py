@@ -27,6 +27,7 @@ from softplc.robotics.planning import ClockPlanning, Planning, ProcessPlanning
 from softplc.adapters.fleet.remote import PUBLISHED_TAGS, AgentRefusal, RemoteLink
 from softplc.robotics.robots import DriverKind, Pose, RobotFile, RobotSpec, load_robots
 from softplc.adapters.fleet.settings import FleetSettings
+from softplc.util.plurals import plural
 from softplc.core.tagdb import Origin, TagDatabase
 from softplc.core.tags import Quality, Tag
 
@@ -247,7 +248,7 @@ class FleetAdapter:
     def describe(self) -> str:
         remote = len([r for r in self.robots if r.driver is DriverKind.REMOTE])
         width, height = self.floor.grid.size_m
-        return (f"fleet: {len(self.robots)} robots ({len(self.robots) - remote} simulated, {remote} remote) "
+        return (f"fleet: {plural(len(self.robots), 'robot')} ({len(self.robots) - remote} simulated, {remote} remote) "
                 f"on map '{self.floor.grid.name}' {width:.2f} x {height:.2f} m, cycle {self.cycle * 1000:g} ms")
 
     # -- for programs, scenarios and tests -----------------------------------------------

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from softplc.adapters.history.aggregates import Aggregate
+from softplc.util.plurals import plural
 from softplc.util.timestamps import format_utc, parse_utc
 
 EXIT_OK, EXIT_FAILURE, EXIT_CONFIG = 0, 1, 2
@@ -172,7 +173,7 @@ def _export(args: argparse.Namespace) -> int:
             stream.close()
     if args.output:
         count = sum(len(samples) for samples in series.values())
-        print(f"wrote {count} values of {len(series)} tags to {args.output}", file=sys.stderr)
+        print(f"wrote {plural(count, 'value')} of {plural(len(series), 'tag')} to {args.output}", file=sys.stderr)
     return EXIT_OK
 
 

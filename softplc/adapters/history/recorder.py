@@ -23,6 +23,7 @@ from softplc.adapters.history.settings import HistorySettings, TagPolicy
 from softplc.adapters.history.columns import QUALITY_CODES
 from softplc.adapters.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.adapters.history.swinging_door import SwingingDoor
+from softplc.util.plurals import plural
 from softplc.util.realtime import shorten_switch_interval
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.storage.process import ProcessWriter
@@ -196,7 +197,7 @@ class HistoryRecorder:
         where = self.storage.describe() if self.storage else "?"
         sim = " (simulated time)" if self._plant is not None and self._plant.clock.simulated else ""
         period = self.storage.flush_period if self.storage else 0.0
-        return f"history: recording {len(self.filters)} tags to {where}{sim}, flushed every {period:g} s"
+        return f"history: recording {plural(len(self.filters), 'tag')} to {where}{sim}, flushed every {period:g} s"
 
     def metrics(self) -> dict[str, Any]:
         """Figures for /metrics (named in manifest.py): rows written, the queue's depth, drops, failed commits."""

@@ -39,6 +39,7 @@ from softplc.adapters.hmi.supervisory import add_supervisory
 from softplc.adapters.hmi.views import View, load_views
 from softplc.adapters.hmi.writelog import WriteLog
 from softplc.security.logins import PasswordLogins
+from softplc.util.plurals import plural
 from softplc.security.users import UserStore
 from softplc.config.yamlsource import ConfigError
 
@@ -157,7 +158,7 @@ class HmiServer:
         users = self.sessions.users if self._runner is not None else None
         count = len(users.entries()) if users is not None else 0
         where = users.path if users is not None else "users file"
-        line = f"HMI on {self.url or settings.host} (open it in a browser; {anonymous}; {count} users in {where})"
+        line = f"HMI on {self.url or settings.host} (open it in a browser; {anonymous}; {plural(count, 'user')} in {where})"
         return f"{line}\n{self.metrics_route.describe()}" if self._runner is not None and self.metrics_route.served else line
 
     # -- parts of start -------------------------------------------------------------------------

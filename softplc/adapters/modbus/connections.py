@@ -37,6 +37,7 @@ from pymodbus.server.requesthandler import ServerRequestHandler
 
 from softplc.adapters.modbus.framing import MAX_FRAME, Frame, FrameBuffer, FramingError
 from softplc.util.peers import PeerLog, peer_host
+from softplc.util.plurals import counted
 
 log = logging.getLogger(__name__)
 REPORT_INTERVAL = 60.0
@@ -60,10 +61,11 @@ class ConnectionCounts:
 class EventReport:
     """Logs the first event of a burst at once, then one line per interval with the count."""
 
-    def __init__(self, level: int, first: str, summary: str, interval: float = REPORT_INTERVAL) -> None:
+    def __init__(self, level: int, first: str, summary: str, what: str, interval: float = REPORT_INTERVAL) -> None:
         self.level = level
         self.first = first  # formatted with the event's detail
-        self.summary = summary  # formatted with the number of events since the last line
+        self.summary = summary  # formatted with the count of the events since the last line: "3 more connections"
+        self.what = what  # those events, in the plural: "more connections"
         self.interval = interval
         self.total = 0
         self._pending = 0
@@ -92,7 +94,7 @@ class EventReport:
 
     def _flush(self) -> None:
         if self._pending:
-            log.log(self.level, self.summary, self._pending)
+            log.log(self.level, self.summary, counted(self._pending, self.what))
             self._pending = 0
 
 
@@ -265,12 +267,14 @@ class PlcTcpServer(ModbusTcpServer):
         self.refusal_report = EventReport(
             logging.WARNING,
             f"Modbus TCP: refused a connection from %s: max_connections ({max_connections}) are open",
-            f"Modbus TCP: refused %d more connections (max_connections {max_connections}) in the last {REPORT_INTERVAL:g} s",
+            f"Modbus TCP: refused %s (max_connections {max_connections}) in the last {REPORT_INTERVAL:g} s",
+            "more connections",
         )
         self.idle_report = EventReport(
             logging.INFO,
             f"Modbus TCP: closed the connection from %s: nothing received for {idle_timeout:g} s (idle_timeout)",
-            f"Modbus TCP: closed %d more idle connections in the last {REPORT_INTERVAL:g} s",
+            f"Modbus TCP: closed %s in the last {REPORT_INTERVAL:g} s",
+            "more idle connections",
         )
 
     @property

@@ -37,6 +37,7 @@ from softplc.adapters.modbus.identification import device_objects, identificatio
 from softplc.adapters.modbus.image import RegisterImage
 from softplc.adapters.modbus.requests import LIMITS, RequestGuard, guarded_requests
 from softplc.adapters.modbus.settings import ModbusSettings, settings_problems
+from softplc.util.plurals import plural
 from softplc.core.plant import AdapterError, Plant
 from softplc.core.tagdb import Origin, Rule, TagDatabase
 from softplc.config.yamlsource import ConfigError
@@ -52,6 +53,9 @@ EXCEPTION_FOR_RULE: dict[Rule, ExcCodes] = {
     Rule.OUT_OF_RANGE: ExcCodes.ILLEGAL_VALUE,
     Rule.ACCESS_DENIED: ExcCodes.ILLEGAL_ADDRESS,
     Rule.INVALID_REQUEST: ExcCodes.ILLEGAL_ADDRESS,
+    # Forced by an engineer: not writable until unforced, like a read-only tag. Not 04 (the server
+    # did not fail) nor 06 "busy" (the client would retry a write that cannot succeed).
+    Rule.FORCED: ExcCodes.ILLEGAL_ADDRESS,
 }
 # The read that pymodbus does after FC5/FC6 builds the echo of the request: leave the
 # just-written words in place instead of refreshing them from the (not yet applied) tag.
@@ -114,7 +118,7 @@ class ModbusAdapter:
         self._remove_log_filter = lognoise.install()
         sockets = getattr(server.transport, "sockets", None) or []
         self.port = sockets[0].getsockname()[1] if sockets else settings.port
-        log.debug("Modbus TCP serving %d tags on %s:%s unit %d", len(self.map), settings.host, self.port, settings.unit_id)
+        log.debug("Modbus TCP serving %s on %s:%s unit %d", plural(len(self.map), "tag"), settings.host, self.port, settings.unit_id)
 
     async def stop(self) -> None:
         self._stop_watching()
@@ -142,9 +146,10 @@ class ModbusAdapter:
         }
 
     def describe(self) -> str:
-        counts = ", ".join(f"{sum(m.words for m in self.map.in_table(t))} {t.plural}" for t in Table)
+        counts = ", ".join(plural(sum(m.words for m in self.map.in_table(t)), t.value.replace("_", " ") if t.is_bit else f"{t.value} register",
+                                  t.plural) for t in Table)
         where = f"{self.settings.host}:{self.port if self.port is not None else self.settings.port}"
-        return f"Modbus TCP on {where} unit {self.settings.unit_id} ({len(self.map)} tags: {counts}; see softplc modbus-map)"
+        return f"Modbus TCP on {where} unit {self.settings.unit_id} ({plural(len(self.map), 'tag')}: {counts}; see softplc modbus-map)"
 
     def _stop_watching(self) -> None:
         if self._unsubscribe is not None:

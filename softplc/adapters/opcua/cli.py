@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from softplc.util.plurals import plural
 from softplc.core.roles import ROLE_NAMES
 from softplc.config.yamlsource import load_yaml
 
@@ -218,7 +219,7 @@ def cmd_users_list(args: argparse.Namespace) -> int:
 
     store = _store(args)
     entries = store.entries()
-    print(f"users file: {store.path} ({len(entries)} users)")
+    print(f"users file: {store.path} ({plural(len(entries), 'user')})")
     if entries:
         rows = [[e.name, e.role.value, "certificate " + e.certificate[:16] if e.certificate else "password"] for e in entries]
         print_table(rows, ("name", "role", "login"))

@@ -188,7 +188,12 @@ class GuardedProcessor(UaProcessor):
             token = params.UserIdentityToken
             if not isinstance(token, ua.UserNameIdentityToken) or not token.UserName:
                 return True
-            name, password = self.iserver.decrypt_user_token(session, token)
+            try:
+                name, password = self.iserver.decrypt_user_token(session, token)
+            except UnicodeDecodeError as error:
+                # A password that is not UTF-8 (asyncua would answer with an error line per
+                # login): decoded as the user name is, so the login check refuses and logs it.
+                name, password = token.UserName, bytes(error.object).decode("utf-8", "surrogateescape")
         except Exception:  # noqa: BLE001
             return True  # asyncua fails the same way: BadIdentityTokenInvalid, or a decoding error
         return bool(await check(peer_host(self.name), name, password or ""))

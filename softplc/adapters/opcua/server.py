@@ -46,6 +46,7 @@ from softplc.adapters.opcua.server_status import ServerStatusClock
 from softplc.adapters.opcua.settings import POLICIES, POLICY_NONE, POLICY_TEXT, OpcUaSettings
 from softplc.adapters.opcua.transport import ConnectionLimits, GuardedServer
 from softplc.adapters.opcua.user_manager import SoftplcUserManager
+from softplc.util.plurals import plural
 from softplc.security.users import UserStore
 from softplc.adapters.opcua.writes import MAX_NODES_PER_READ, MAX_NODES_PER_WRITE, TagAttributeService
 from softplc.config.yamlsource import ConfigError
@@ -156,8 +157,8 @@ class OpcUaServer:
         assert self.publisher is not None
         self.publisher.run()
         self.startup_seconds = time.perf_counter() - started
-        log.info("OPC UA serving %d tags (%d nodes) on %s, ready in %.2f s",
-                 len(plant.tags), self.node_count, self.endpoint, self.startup_seconds)
+        log.info("OPC UA serving %s (%s) on %s, ready in %.2f s",
+                 plural(len(plant.tags), "tag"), plural(self.node_count, "node"), self.endpoint, self.startup_seconds)
 
     async def _build_server(self, server: Server, plant: Plant) -> None:
         settings = self.settings
@@ -213,7 +214,7 @@ class OpcUaServer:
         users = len(self.users.entries()) if self.users is not None else 0
         where = self.users.path if self.users is not None else "users file"
         namespace = f"ns={self.namespace_index} {self.namespace_uri}"
-        return f"OPC UA on {self.endpoint} ({namespace}; security: {policies}; {anonymous}; {users} users in {where})"
+        return f"OPC UA on {self.endpoint} ({namespace}; security: {policies}; {anonymous}; {plural(users, 'user')} in {where})"
 
     # -- parts of start -------------------------------------------------------------------
 

@@ -72,6 +72,7 @@ _RULE_CODES = {
     Rule.OUT_OF_RANGE: ua.StatusCodes.BadOutOfRange,
     Rule.ACCESS_DENIED: ua.StatusCodes.BadUserAccessDenied,
     Rule.FORCED: ua.StatusCodes.BadLocked,  # "locked by a different application": an engineer's force
+    Rule.INVALID_REQUEST: ua.StatusCodes.BadInvalidArgument,  # e.g. an item of an all-or-nothing batch
 }
 _CODE_RULES = {
     ua.StatusCodes.BadTypeMismatch: Rule.TYPE_MISMATCH,

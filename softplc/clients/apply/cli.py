@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import re
 import sys
 from typing import Any
 
@@ -99,7 +100,8 @@ async def apply(login: Login, *, check: bool) -> Any:
         if error.no_door:
             raise ApplyError(f"{login.endpoint}: {error} (an older softplc?)") from None
         first = str(error).split("\n", 1)[0]
-        status = EXIT_PROBLEMS if " problem(s):" in first else EXIT_RESTART if "need a restart" in first else EXIT_REFUSED
+        # "1 problem:", "2 problems:" ("problem(s):" from runtimes before 2026-11-27)
+        status = EXIT_PROBLEMS if re.search(r" \d+ problem(s|\(s\))?:", first) else EXIT_RESTART if "need a restart" in first else EXIT_REFUSED
         raise ApplyError(str(error), status, runtime_words=True) from None
     except (OSError, asyncio.TimeoutError, ConnectionError) as error:
         raise ApplyError(f"lost the connection to {login.endpoint}: {error or type(error).__name__}", EXIT_NO_CONNECTION) from None

@@ -22,7 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from softplc.core.commands import CommandRefused
-from softplc.clients.login import LoginError, add_login_arguments, login_from_args
+from softplc.clients.login import LoginError, add_login_arguments, endpoint_url, login_from_args
+from softplc.util.plurals import plural
 from softplc.util.timestamps import TIME_HELP, format_shown, parse_time
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_NO_CONNECTION, EXIT_NOT_ALLOWED = 0, 1, 2, 3, 4
@@ -65,7 +66,7 @@ def add_commands(subparsers: Any) -> None:
     store.add_argument("--sim", action="store_true", help="the trail of the last `softplc run --sim` (simulated time: "
                        "--since 10s counts back from its last entry)")
     store.add_argument("--plant", metavar="NAME", help="plant (runtime) name in a shared store, * for all (default CONFIG's)")
-    audit.add_argument("--endpoint", metavar="URL", help="ask the runtime serving OPC UA at URL instead (audit.query, engineers only)")
+    audit.add_argument("--endpoint", metavar="URL", type=endpoint_url, help="ask the runtime serving OPC UA at URL instead (audit.query, engineers only)")
     add_login_arguments(audit, endpoint=False, user_help="; with --endpoint")
     audit.set_defaults(func=cmd_audit)
 
@@ -228,7 +229,7 @@ def _show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> None:
         if args.output:
             stream.close()
     if args.output:
-        print(f"wrote {len(rows)} audit entries to {args.output}", file=sys.stderr)
+        print(f"wrote {plural(len(rows), 'audit entry', 'audit entries')} to {args.output}", file=sys.stderr)
     elif not rows:
         print("no audit entries match", file=sys.stderr)
 

@@ -30,6 +30,7 @@ from softplc.config.programs import raised_at, split_reference
 from softplc.core.function_blocks import warm_start
 from softplc.engine.online_change.diff import ConfigDiff, diff_configs
 from softplc.core.origin import Origin
+from softplc.util.plurals import plural
 from softplc.core.program import Program, ProgramContext
 from softplc.engine.program_instance import ProgramInstance, ProgramState
 from softplc.util.realtime import shorten_switch_interval
@@ -125,7 +126,7 @@ class OnlineChange:
                                      "no other change can be applied until it returns") from None
             details = self._details(prepared)
             if prepared.problems:
-                raise ChangeRefused(_refusal(f"{len(prepared.problems)} problem(s)", prepared.problems, prepared.diff), details)
+                raise ChangeRefused(_refusal(plural(len(prepared.problems), "problem"), prepared.problems, prepared.diff), details)
             if prepared.diff.needs_restart:
                 reasons = prepared.diff.needs_restart
                 raise ChangeRefused(_refusal("changes that need a restart of the runtime", reasons, prepared.diff), details)

@@ -135,7 +135,7 @@ def test_instances_from_errors(tmp_path: Path) -> None:
     robots_file = str(tmp_path / "robots.yaml")
     assert (f"{robots_file}:3:5", "item 2 cannot be an instance of template 'robot': it has no 'id'") in found
     assert (f"{robots_file}:4:5", "item 3 cannot be an instance of template 'robot': its id '9lives' is not a valid name "
-            "(letters, digits and _, not starting with a digit)") in found
+            "(ASCII letters, digits and _, not starting with a digit)") in found
     assert (f"{tmp_path / 'tagdb.yaml'}:6:38", f"no item of {robots_file} has 'start.why'") in found
 
 

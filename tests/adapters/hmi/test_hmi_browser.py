@@ -15,12 +15,14 @@ from typing import Any
 import pytest
 import pytest_asyncio
 
-from hmi_support import (ARTIFACTS, SCRIPT_DESCRIPTION, Plant, browser, chromium_available, log_in, open_page, plant_yaml,  # noqa: F401 (browser: a fixture)
+from hmi_support import (ARTIFACTS, SCRIPT_DESCRIPTION, Plant, browser, chromium_available, playwright_available, log_in, open_page, plant_yaml,  # noqa: F401 (browser: a fixture)
                          ready, screenshot_on_failure, start_plant, wait_until)
+from tools_support import missing
 
-pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
+if not playwright_available():
+    missing("the playwright package is not installed (pip install -e .[test]; scripts/bootstrap.sh test)", module=True)
 if not chromium_available():
-    pytest.skip("Debian's chromium is not installed (scripts/install-test-tools.sh)", allow_module_level=True)
+    missing("Debian's chromium is not installed (scripts/install-test-tools.sh)", module=True)
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 

@@ -8,7 +8,6 @@ says that the target is up and that a softplc metric has the value the runtime h
 from __future__ import annotations
 
 import asyncio
-import os
 import shutil
 import socket
 import time
@@ -19,12 +18,13 @@ import aiohttp
 import pytest
 
 from hmi_support import start_plant
+from tools_support import missing
 from softplc.adapters.metrics.adapter import MetricsAdapter
 from softplc.adapters.hmi.metrics_settings import MetricsSettings
 
-PROMETHEUS = shutil.which("prometheus") or "/usr/bin/prometheus"
-if not os.path.exists(PROMETHEUS):
-    pytest.skip("Debian's prometheus is not installed (scripts/install-test-tools.sh)", allow_module_level=True)
+PROMETHEUS = shutil.which("prometheus") or ""
+if not PROMETHEUS:
+    missing("Debian's prometheus is not installed (scripts/install-test-tools.sh)", module=True)
 
 SCRAPE_CONFIG = """
 global:

@@ -159,12 +159,17 @@ async def test_an_idle_connection_is_closed_and_a_polling_client_is_not(tmp_path
 
 async def test_event_report_logs_a_burst_in_two_lines(caplog):
     caplog.set_level(logging.INFO, logger=CONNECTIONS_LOGGER)
-    report = EventReport(logging.WARNING, "refused %s", "refused %d more", interval=3600.0)
+    report = EventReport(logging.WARNING, "refused %s", "refused %s", "more connections", interval=3600.0)
     for index in range(1000):
         report.note(f"peer {index}")
     report.close()
-    assert [r.getMessage() for r in caplog.records] == ["refused peer 0", "refused 999 more"]
+    assert [r.getMessage() for r in caplog.records] == ["refused peer 0", "refused 999 more connections"]
     assert report.total == 1000
+    caplog.clear()
+    for index in range(2):  # one more: singular
+        report.note(f"peer {index}")
+    report.close()
+    assert [r.getMessage() for r in caplog.records] == ["refused peer 0", "refused 1 more connection"]
 
 
 def write_config(tmp_path, modbus: str):

@@ -162,3 +162,35 @@ def test_run_serves_with_command_line_overrides(tmp_path: Path) -> None:
     finally:
         process.terminate()
         process.wait(timeout=30)
+
+
+# Every client command that reaches a runtime over OPC UA, with what else it needs on its command line.
+CLIENT_COMMANDS = {
+    "read": ["read", "speed"],
+    "write": ["write", "speed=1"],
+    "watch": ["watch", "speed"],
+    "forces": ["forces"],
+    "force": ["force", "speed=1"],
+    "unforce": ["unforce", "speed"],
+    "alarms": ["alarms", "list"],
+    "audit": ["audit"],
+    "apply": ["apply"],
+    "robot-agent": ["robot-agent", "--robot", "r01"],
+}
+
+
+@pytest.mark.parametrize("command", list(CLIENT_COMMANDS))
+@pytest.mark.parametrize("endpoint, hint", [
+    ("http://127.0.0.1:8080/", "http:// is the address of a web page (the HMI), not of an OPC UA server"),
+    ("127.0.0.1:4840", "no scheme"),
+    ("opc.tcp://", "no host"),
+    ("opc.tcp://plc7:port/softplc/", "'port' is not a port number"),
+], ids=["http", "no scheme", "no host", "bad port"])
+def test_client_commands_refuse_an_endpoint_that_is_not_opc_tcp(command: str, endpoint: str, hint: str, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit:
+        main([*CLIENT_COMMANDS[command], "--endpoint", endpoint])
+    assert exit.value.code == 2  # a bad command line
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert f"argument --endpoint: {endpoint!r} is not an OPC UA endpoint ({hint}): write opc.tcp://HOST:PORT/PATH, e.g. opc.tcp://127.0.0.1:4840/softplc/" in err, err

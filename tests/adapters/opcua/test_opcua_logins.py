@@ -9,11 +9,12 @@ import time
 
 import pytest
 import pytest_asyncio
-from asyncua import ua
+from asyncua import Client, ua
 
 from softplc.adapters.opcua import Role
 from softplc.security import logins as logins_module
-from softplc.security.logins import FAILURES_PER_PEER, FAILURES_PER_PEER_AND_USER, LoginThrottle
+from softplc.security.logins import FAILURES_PER_PEER, FAILURES_PER_PEER_AND_USER, LoginThrottle, PasswordLogins
+from softplc.security.users import UserStore
 from softplc.security.passwords import SCRYPT_LOG2_N, verify_password
 from tests.opcua_support import TEST_HASH_COST, client_for, running_plant
 
@@ -132,3 +133,61 @@ def test_throttle_counts_per_peer_and_user_per_peer_and_per_user() -> None:
     assert throttle.refusal("10.0.0.4", "bob") is not None and throttle.refusal("10.0.0.5", "bob") is None
     now[0] = 61.0  # the window has passed
     assert throttle.refusal("10.0.0.1", "alice") is None and throttle.refusal("10.0.0.4", "bob") is None
+
+
+class _RawPasswordClient(Client):
+    """An asyncua client that sends its password bytes as they are (a client may send any bytes)."""
+
+    raw_password = b""
+
+    def _add_user_auth(self, params: ua.ActivateSessionParameters, username: str | None, password: str | None) -> None:
+        super()._add_user_auth(params, username, password)
+        params.UserIdentityToken.Password = self.raw_password
+
+
+async def _log_in_raw(server, user: str, password: bytes) -> ua.StatusCode:
+    client = _RawPasswordClient(server.endpoint, timeout=4)
+    client.raw_password = password
+    client.set_user(user)
+    client.set_password("placeholder")
+    try:
+        async with client:
+            return ua.StatusCode()
+    except ua.UaStatusCodeError as refused:
+        return ua.StatusCode(refused.code)
+
+
+@in_module_loop
+async def test_credentials_that_are_not_utf8_are_refused_cleanly_and_logged_once(plant, caplog: pytest.LogCaptureFixture) -> None:
+    _, server = plant
+    caplog.set_level(logging.INFO)
+    caplog.clear()
+    attempts = [
+        ("op\udcff\udcfeerator", b"operator-pass-1"),  # the user name's bytes 6f 70 ff fe ...: not UTF-8
+        ("operator", b"\xff\xfe-password"),  # the password's
+    ] * 3
+    answers = [await _log_in_raw(server, user, password) for user, password in attempts]
+    refusals = {ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadIdentityTokenInvalid}
+    assert all(answer.value in refusals for answer in answers), [answer.name for answer in answers]
+    assert not [record for record in caplog.records if record.exc_info or record.levelno >= logging.ERROR], caplog.text
+    lines = [record.getMessage() for record in caplog.records if "UTF-8" in record.getMessage()]
+    assert len(lines) == 1, caplog.text  # one line for the peer; the other attempts are counted for its summary
+    assert "refused" in lines[0] and "127.0.0.1" in lines[0]
+    async with client_for(server) as anonymous:  # the server still serves (anonymous: no login budget spent)
+        assert await anonymous.get_node("ns=2;s=s1").read_value() == "hello"
+
+
+async def test_the_hmi_login_check_refuses_lone_surrogates_from_json_without_hashing(tmp_path, caplog: pytest.LogCaptureFixture) -> None:
+    # JSON may carry "\udcff" in a user name: the HMI hands it to the same login check.
+    store = UserStore(tmp_path / "users.yaml")
+    store.add("operator", Role.OPERATOR, "operator-pass-1", log2_n=TEST_HASH_COST)
+    logins = PasswordLogins(store, service="HMI")
+    try:
+        assert await logins.check("10.0.0.9", "oper\ud800ator", "operator-pass-1") is False
+        assert await logins.check("10.0.0.9", "operator", "pass\udcff") is False
+        assert await logins.check("10.0.0.9", "operator", "operator-pass-1") is True
+    finally:
+        logins.close()
+    assert logins.hashed == 1
+    lines = [record.getMessage() for record in caplog.records if "UTF-8" in record.getMessage()]
+    assert lines == ["HMI: login from 10.0.0.9 refused: its user name or password is not valid UTF-8 (user name 'oper\\ud800ator')"]
