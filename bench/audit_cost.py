@@ -168,7 +168,7 @@ async def measure(args: argparse.Namespace, state: Path, audit: bool) -> dict[st
 
 def count_entries(recorder: Any, since: float) -> int:
     """Write entries from `since` on in the (stopped) recorder's store."""
-    from softplc.adapters.audit.store import CATALOGUE
+    from softplc.storage.audit.store import CATALOGUE
 
     database = recorder.database
     connection = database.connect(readonly=True)

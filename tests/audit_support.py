@@ -17,8 +17,8 @@ from asyncua import Client, ua
 
 from softplc import InOut, Program
 from softplc.app.adapters import build_adapters
-from softplc.adapters.audit.entry import AuditEntry
-from softplc.adapters.audit.queries import AuditQuery
+from softplc.storage.audit.entry import AuditEntry
+from softplc.storage.audit.queries import AuditQuery
 from softplc.adapters.audit.recorder import AuditRecorder
 from softplc.core.clock import RealClock
 from softplc.config import load_config

@@ -41,8 +41,8 @@ DEFAULT_CONFIG = "tagdb.yaml"
 
 # Modules of the clients and tools that add subcommands (each defines add_commands(subparsers));
 # the adapters' come from their manifests.
-COMMAND_MODULES: tuple[str, ...] = ("softplc.svm.cli", "softplc.scenarios.cli", "softplc.latency.cli", "softplc.clients.alarms.cli",
-                                   "softplc.clients.tags.cli", "softplc.clients.apply.cli", "softplc.clients.audit.cli")
+COMMAND_MODULES: tuple[str, ...] = ("softplc.svm.cli", "softplc.scenarios.cli", "softplc.latency.cli", "softplc.clients.robot_agent.cli",
+                                   "softplc.clients.alarms.cli", "softplc.clients.tags.cli", "softplc.clients.apply.cli", "softplc.clients.audit.cli")
 
 log = logging.getLogger("softplc")
 

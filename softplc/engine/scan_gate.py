@@ -65,7 +65,7 @@ class ScanGate:
         """Like `worker()`, for work done in small steps that calls the yielded `step()` between them.
 
         No profile hook, so no cost on every call: the work (e.g. the audit trail's writer,
-        softplc/adapters/audit/store.py) keeps each step well under the margin (2 ms) itself.
+        softplc/storage/audit/store.py) keeps each step well under the margin (2 ms) itself.
         """
         self._open_until = 0.0
         self._watching += 1

@@ -84,7 +84,7 @@ def test_check_imports_what_the_adapters_need_and_no_more() -> None:
 
 def test_choices_copied_for_a_light_parser_match_their_source() -> None:
     from softplc.clients.robot_agent import agent
-    from softplc.adapters.fleet import cli as fleet_cli
+    from softplc.clients.robot_agent import cli as fleet_cli
     from softplc.adapters.opcua import cli as opcua_cli
     from softplc.core import roles
     assert opcua_cli.ROLE_NAMES == roles.ROLE_NAMES

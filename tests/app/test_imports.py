@@ -114,3 +114,77 @@ def test_command_modules_print_tables_without_the_top_level_cli() -> None:
     graph = import_graph()
     # softplc.app.entry_point is the process around the command line (the console script), not a command module.
     assert [name for name, targets in graph.items() if "softplc.app.cli" in targets] == ["softplc.app.entry_point"]
+
+
+# What each part of the package may import besides itself (its own package: always).
+_BELOW_ADAPTERS = {"util", "core", "config", "security", "storage", "protocols", "robotics"}
+MAY_IMPORT: dict[str, set[str]] = {
+    "util": set(),
+    "core": {"util"},
+    "config": {"util", "core"},
+    "security": {"util", "core", "config"},
+    "engine": {"util", "core", "config"},
+    "storage": {"util", "core", "config"},
+    "protocols": {"util", "core", "config", "security"},
+    "robotics": {"util", "core", "config"},
+    "adapters": _BELOW_ADAPTERS,  # and its own adapter's folder (see part_of)
+    "clients": _BELOW_ADAPTERS,
+}
+
+
+def part_of(module: str) -> str:
+    """The layer part a module belongs to: 'core', 'engine', 'adapters.hmi', 'app', 'latency'..."""
+    parts = module.split(".")
+    if len(parts) == 1 or parts[1] in ("__main__",):
+        return "package"
+    if parts[1] == "adapters" and len(parts) > 2:
+        return f"adapters.{parts[2]}"
+    return parts[1]
+
+
+def layer_violations(graph: dict[str, set[str]]) -> list[str]:
+    """Every import that goes against the layers, as 'importer -> imported (why)'."""
+    found = []
+    for module, targets in sorted(graph.items()):
+        part = part_of(module)
+        layer = part.split(".")[0]
+        if layer not in MAY_IMPORT:
+            continue  # the application, the thesis tools, the package's face: anything below them
+        allowed = MAY_IMPORT[layer] | {part}
+        for target in sorted(targets):
+            target_part = part_of(target)
+            if target_part in allowed or target_part.split(".")[0] in allowed - {"adapters"}:
+                continue
+            if target == "softplc.adapters":  # the folder's package: a docstring, no code
+                continue
+            if target == "softplc" and layer not in ("util", "core"):  # the package's face: __version__ (it imports the core)
+                continue
+            found.append(f"{module} -> {target} ({part} may import {', '.join(sorted(allowed))})")
+    return found
+
+
+def test_every_import_respects_the_layers() -> None:
+    found = layer_violations(import_graph())
+    assert not found, "imports against the layers (docs/architecture.md):\n" + "\n".join(found)
+
+
+def test_the_layer_check_fails_on_an_adapter_that_imports_the_runtime_or_another_adapter() -> None:
+    graph = {
+        "softplc.adapters.hmi.server": {"softplc.app.runtime", "softplc.adapters.alarms.engine", "softplc.core.plant",
+                                        "softplc.adapters.hmi.live"},
+        "softplc.clients.tags.cli": {"softplc.adapters.opcua.server"},
+        "softplc.core.tagdb": {"softplc.engine.scan"},
+        "softplc.app.runtime": {"softplc.adapters.hmi.server"},
+    }
+    found = layer_violations(graph)
+    assert [line.split(" (")[0] for line in found] == [
+        "softplc.adapters.hmi.server -> softplc.adapters.alarms.engine",
+        "softplc.adapters.hmi.server -> softplc.app.runtime",
+        "softplc.clients.tags.cli -> softplc.adapters.opcua.server",
+        "softplc.core.tagdb -> softplc.engine.scan",
+    ]
+
+
+def test_top_level_modules_are_few() -> None:
+    loose = sorted(path.name for path in PACKAGE.glob("*.py"))
+    assert loose == ["__init__.py", "__main__.py"], loose

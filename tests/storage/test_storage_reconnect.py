@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from softplc.app.adapters import build_adapters
-from softplc.adapters.alarms.journal import TABLE, JournalSink
+from softplc.storage.alarm_journal import TABLE, JournalSink
 from softplc.core.clock import RealClock
 from softplc.config import parse_config
 from softplc.core.roles import Role

@@ -18,9 +18,9 @@ from pathlib import Path
 
 from asyncua import ua
 
-from softplc.adapters.alarms.journal import TABLE, AlarmJournal, JournalEntry, JournalQuery, JournalSink
-from softplc.adapters.audit.queries import AuditQuery, search
-from softplc.adapters.audit.store import AuditSink
+from softplc.storage.alarm_journal import TABLE, AlarmJournal, JournalEntry, JournalQuery, JournalSink
+from softplc.storage.audit.queries import AuditQuery, search
+from softplc.storage.audit.store import AuditSink
 from softplc.adapters.history.queries import HistoryReader
 from softplc.adapters.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.core.roles import Role

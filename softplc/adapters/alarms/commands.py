@@ -25,7 +25,7 @@ from typing import Any
 
 from softplc.adapters.alarms.actions import AlarmActions
 from softplc.adapters.alarms.engine import AlarmEngine
-from softplc.adapters.alarms.journal import AlarmJournal, JournalQuery
+from softplc.storage.alarm_journal import AlarmJournal, JournalQuery
 from softplc.core.alarms import AlarmState, Priority
 from softplc.core.clock import Clock
 from softplc.core.commands import CommandRefused, Commands, Permission

@@ -12,8 +12,8 @@ from softplc.util.lazy import lazy_exports
 # Imported on first use: the section module is loaded with every configuration, so this
 # package must stay light.
 __getattr__, __dir__ = lazy_exports(__name__, {
-    "softplc.adapters.audit.settings": ("AuditSettings",),
-    "softplc.adapters.audit.entry": ("AuditEntry",),
-    "softplc.adapters.audit.queries": ("AuditQuery", "search", "write_csv"),
+    "softplc.storage.audit.settings": ("AuditSettings",),
+    "softplc.storage.audit.entry": ("AuditEntry",),
+    "softplc.storage.audit.queries": ("AuditQuery", "search", "write_csv"),
     "softplc.adapters.audit.recorder": ("AuditRecorder",),
 })

@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def build(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
-    from softplc.adapters.audit.settings import AuditSettings
+    from softplc.storage.audit.settings import AuditSettings
 
     settings = AuditSettings.from_config(config)  # checked by its section owner (section.py)
     if not settings.enabled or flag(args, "no_audit", False):

@@ -19,10 +19,10 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from softplc.adapters.audit.commands import register_audit_commands
-from softplc.adapters.audit.entry import AuditEntry, CallRecord
-from softplc.adapters.audit.queries import AuditQuery, search
-from softplc.adapters.audit.settings import AuditSettings
-from softplc.adapters.audit.store import SINK_NAME, AuditSink
+from softplc.storage.audit.entry import AuditEntry, CallRecord
+from softplc.storage.audit.queries import AuditQuery, search
+from softplc.storage.audit.settings import AuditSettings
+from softplc.storage.audit.store import SINK_NAME, AuditSink
 from softplc.core.clock import Clock
 from softplc.core.commands import CommandCall, Commands
 from softplc.util.realtime import shorten_switch_interval

@@ -1,8 +1,8 @@
-"""The audit trail's part of tagdb.yaml: the optional `audit:` section (softplc/adapters/audit/settings.py)."""
+"""The audit trail's part of tagdb.yaml: the optional `audit:` section (softplc/storage/audit/settings.py)."""
 
 from __future__ import annotations
 
-from softplc.adapters.audit.settings import AUDIT_SCHEMA, problems
+from softplc.storage.audit.settings import AUDIT_SCHEMA, problems
 from softplc.config.schema import Section
 
 SECTION = Section(path=("audit",), schema=AUDIT_SCHEMA, problems=problems)

@@ -50,8 +50,8 @@ def audit_routes(server: HmiServer) -> list[web.RouteDef]:
         except CommandRefused as refused:
             status = 403 if not identity.role.may_engineer else 422
             raise _refusal(status, str(refused)) from None
-        from softplc.adapters.audit.entry import AuditEntry
-        from softplc.adapters.audit.queries import write_csv
+        from softplc.storage.audit.entry import AuditEntry
+        from softplc.storage.audit.queries import write_csv
 
         stream = io.StringIO()
         write_csv((AuditEntry.from_dict(row) for row in rows), stream)

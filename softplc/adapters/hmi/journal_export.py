@@ -71,7 +71,7 @@ def _time_or_text(value: str) -> Any:
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
-    from softplc.adapters.alarms.journal import entries_from_dicts, write_csv  # the alarms' own format; loaded when asked for
+    from softplc.storage.alarm_journal import entries_from_dicts, write_csv  # the alarms' own format; loaded when asked for
 
     stream = io.StringIO()
     write_csv(entries_from_dicts(rows), stream)

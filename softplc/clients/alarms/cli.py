@@ -198,7 +198,7 @@ def cmd_journal(args: argparse.Namespace) -> int:
                 json.dump(rows, stream, indent=2)
                 stream.write("\n")
             else:
-                from softplc.adapters.alarms.journal import entries_from_dicts, write_csv
+                from softplc.storage.alarm_journal import entries_from_dicts, write_csv
 
                 write_csv(entries_from_dicts(rows), stream)
         finally:

@@ -122,9 +122,8 @@ def _time(text: str | None, option: str, now: float) -> float | None:
 
 
 def _local(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
-    from softplc.adapters.audit.commands import query_from_arguments
-    from softplc.adapters.audit.queries import MAX_ROWS, AuditQuery, search
-    from softplc.adapters.audit.settings import AuditSettings
+    from softplc.storage.audit.queries import MAX_ROWS, AuditQuery, query_from_arguments, search
+    from softplc.storage.audit.settings import AuditSettings
     from softplc.config import load_config
     from softplc.storage import Database
     from softplc.storage.database import driver_errors
@@ -208,7 +207,7 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
 
 
 def _show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> None:
-    from softplc.adapters.audit.entry import AuditEntry, format_value
+    from softplc.storage.audit.entry import AuditEntry, format_value
 
     stream = args.output.open("w", newline="", encoding="utf-8") if args.output else sys.stdout
     try:
@@ -216,7 +215,7 @@ def _show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> None:
             json.dump(rows, stream, indent=1, ensure_ascii=False, default=str)
             stream.write("\n")
         elif args.format == "csv":
-            from softplc.adapters.audit.queries import write_csv
+            from softplc.storage.audit.queries import write_csv
 
             write_csv((AuditEntry.from_dict(row) for row in rows), stream)
         elif rows:
@@ -237,7 +236,7 @@ def _show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> None:
 def _what(row: dict[str, Any]) -> str:
     if row["kind"] == "write":
         return row["name"]
-    from softplc.adapters.audit.entry import format_value
+    from softplc.storage.audit.entry import format_value
 
     arguments = row["arguments"] if isinstance(row["arguments"], dict) else {}
     shown = [row["tag"]] if row["tag"] else []

@@ -8,7 +8,7 @@ import io
 from pathlib import Path
 
 from softplc.app.adapters import build_adapters
-from softplc.adapters.alarms.journal import AlarmJournal, JournalQuery, JournalSink, search, write_csv
+from softplc.storage.alarm_journal import AlarmJournal, JournalQuery, JournalSink, search, write_csv
 from softplc.core.clock import RealClock
 from softplc.config import load_config
 from softplc.app.runtime import Runtime

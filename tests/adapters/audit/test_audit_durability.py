@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from softplc.adapters.audit.queries import AuditQuery, search
+from softplc.storage.audit.queries import AuditQuery, search
 from softplc.config import load_config
 from softplc.adapters.modbus.server import ModbusAdapter
 from softplc.adapters.modbus.settings import ModbusSettings

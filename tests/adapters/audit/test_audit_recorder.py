@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from softplc.app.adapters import build_adapters
-from softplc.adapters.audit.queries import AuditQuery, search
+from softplc.storage.audit.queries import AuditQuery, search
 from softplc.core.clock import RealClock
 from softplc.core.commands import CommandRefused
 from softplc.config import load_config

@@ -11,7 +11,7 @@ import pytest
 
 from softplc.config import sections
 from softplc.app.adapters import build_adapters
-from softplc.adapters.audit.settings import DEFAULT_PARTITION, DEFAULT_RETENTION, AuditSettings
+from softplc.storage.audit.settings import DEFAULT_PARTITION, DEFAULT_RETENTION, AuditSettings
 from softplc.app.cli import build_parser, main
 from softplc.config import load_config
 

@@ -6,9 +6,9 @@ import csv
 import io
 from typing import Any
 
-from softplc.adapters.audit.entry import MAX_TEXT, CallRecord
-from softplc.adapters.audit.queries import AuditQuery, search, write_csv
-from softplc.adapters.audit.store import CATALOGUE, AuditSink
+from softplc.storage.audit.entry import MAX_TEXT, CallRecord
+from softplc.storage.audit.queries import AuditQuery, search, write_csv
+from softplc.storage.audit.store import CATALOGUE, AuditSink
 from softplc.core.commands import CommandCall
 from softplc.core.roles import Role
 from softplc.storage import BatchWriter, Database, StorageSettings

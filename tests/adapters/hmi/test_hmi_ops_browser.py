@@ -64,7 +64,7 @@ def ops_plant() -> str:
 @pytest_asyncio.fixture(loop_scope="module", scope="module")
 async def plant(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[Plant]:
     from softplc.adapters.audit.recorder import AuditRecorder
-    from softplc.adapters.audit.settings import AuditSettings
+    from softplc.storage.audit.settings import AuditSettings
 
     folder = tmp_path_factory.mktemp("hmi-ops")
     (folder / "ticker.py").write_text(TICKER)

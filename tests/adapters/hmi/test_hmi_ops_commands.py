@@ -146,7 +146,7 @@ async def test_an_online_change_that_needs_a_restart_is_refused_with_its_details
 
 async def test_the_audit_page_exports_csv_for_engineers_only(tmp_path: Path) -> None:
     from softplc.adapters.audit.recorder import AuditRecorder
-    from softplc.adapters.audit.settings import AuditSettings
+    from softplc.storage.audit.settings import AuditSettings
 
     plant = await start_plant(tmp_path, start=False)
     plant.runtime.adapters.insert(0, AuditRecorder(AuditSettings(section={"flush_period": "50ms"}), "hmi test plant"))

@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager
 from typing import Any
 
-from softplc.adapters.audit.entry import row_of
+from softplc.storage.audit.entry import row_of
 from softplc.storage import Database
 from softplc.storage.partitions import PartitionCatalogue, insert_rows
 

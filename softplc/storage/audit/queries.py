@@ -10,14 +10,16 @@ yet, or holds no partition, simply has no entries.
 from __future__ import annotations
 
 import csv
-from collections.abc import Iterable
+import math
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import IO, Any
 
-from softplc.adapters.audit.entry import COLUMNS, AuditEntry, entry_of, format_value
-from softplc.adapters.audit.store import CATALOGUE, SQL_COLUMNS
+from softplc.core.commands import CommandRefused
 from softplc.storage import Database, like_pattern, plant_and_time
-from softplc.util.timestamps import format_utc
+from softplc.storage.audit.entry import COLUMNS, AuditEntry, entry_of, format_value
+from softplc.storage.audit.store import CATALOGUE, SQL_COLUMNS
+from softplc.util.timestamps import format_utc, parse_utc
 
 MAX_ROWS = 10_000  # most rows one search returns
 KINDS = ("write", "command")
@@ -121,3 +123,54 @@ def write_csv(entries: Iterable[AuditEntry], stream: IO[str]) -> int:
         writer.writerow([format_utc(entry.time), *cells])
         count += 1
     return count
+
+
+# -- a query from a command's arguments (the audit.query command and the CLI) ------------------
+
+
+def query_from_arguments(arguments: Mapping[str, Any]) -> AuditQuery:
+    """The AuditQuery of a call's arguments; raises CommandRefused saying which argument is wrong."""
+    numbers = {}
+    for key, default in (("limit", 1000), ("offset", 0)):
+        value = arguments.get(key, default)
+        if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+            raise CommandRefused(f"audit.query: '{key}' must be a whole number ≥ 0, not {value!r}")
+        numbers[key] = value
+    kind = _text(arguments, "kind")
+    if kind and kind not in KINDS:
+        raise CommandRefused(f"audit.query: 'kind' must be write or command, not {kind!r}")
+    result = _text(arguments, "result")
+    if result not in ("", "accepted", "refused"):
+        raise CommandRefused(f"audit.query: 'result' must be accepted or refused, not {result!r}")
+    plant = arguments.get("plant")
+    if plant is not None and not isinstance(plant, str):
+        raise CommandRefused("audit.query: 'plant' must be text")
+    return AuditQuery(
+        since=parse_time(arguments.get("since"), "since"), until=parse_time(arguments.get("until"), "until"),
+        tag=_text(arguments, "tag"), command=_text(arguments, "command"), user=_text(arguments, "user"),
+        source=_text(arguments, "source"), peer=_text(arguments, "peer"), kind=kind,
+        accepted=None if not result else result == "accepted", plant=plant, **numbers,
+    )
+
+
+def parse_time(value: Any, key: str) -> float | None:
+    """Epoch seconds from a number or an ISO 8601 text (UTC unless it gives a zone); None if absent."""
+    if value is None or value == "":
+        return None
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+        return float(value)
+    if isinstance(value, str):
+        try:
+            return parse_utc(value)
+        except ValueError:
+            pass
+    raise CommandRefused(f"audit.query: '{key}' must be epoch seconds or an ISO 8601 time such as 2026-11-24T08:00:00Z, not {value!r}")
+
+
+def _text(arguments: Mapping[str, Any], key: str) -> str:
+    value = arguments.get(key, "")
+    if value is None:
+        return ""
+    if not isinstance(value, str):
+        raise CommandRefused(f"audit.query: '{key}' must be text, not {type(value).__name__}")
+    return value
