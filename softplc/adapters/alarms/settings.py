@@ -12,6 +12,10 @@
 Every mistake is a located `Problem` (FILE:LINE:COL), all of them at once; a mistake in a
 for_each declaration is reported once, not once per instance. `alarm_problems(config)` is the
 check a configuration registry calls; `AlarmSettings.from_config(config)` raises ConfigError.
+
+(Over 400 lines on purpose: the definitions and the one checker that builds them from the section
+are one concept; the checker's parts share its problem bookkeeping, and apart they would each
+need the other.)
 """
 
 from __future__ import annotations
