@@ -14,7 +14,8 @@ import pytest
 
 from conftest import REPO
 from softplc.config import PlantConfig
-from softplc.app.runtime import Adapter, Runtime
+from softplc.app.runtime import Adapter
+from softplc.core.plant import Plant
 from softplc.scenarios.runner import RunResult, fleet_adapter, run_scenario
 from softplc.scenarios.spec import Scenario, load_scenario
 
@@ -104,12 +105,12 @@ class TeamWatch:
     def __init__(self, inner: Adapter, robots: list[str], tasks: int) -> None:
         self.inner, self.robots, self.tasks = inner, robots, tasks
         self.largest = [0] * tasks
-        self.runtime: Runtime | None = None
+        self.plant: Plant | None = None
 
-    async def start(self, runtime: Runtime) -> None:
-        self.runtime = runtime
-        await self.inner.start(runtime)
-        runtime.engine.after_cycle(self.count)
+    async def start(self, plant: Plant) -> None:
+        self.plant = plant
+        await self.inner.start(plant)
+        plant.after_cycle(self.count)
 
     async def stop(self) -> None:
         await self.inner.stop()
@@ -118,8 +119,8 @@ class TeamWatch:
         return self.inner.describe()
 
     def count(self, task: Any) -> None:
-        assert self.runtime is not None
-        value = self.runtime.db.value
+        assert self.plant is not None
+        value = self.plant.tags.value
         team = [0] * self.tasks
         for robot in self.robots:
             number = value(f"{robot}_tcurr")
