@@ -69,12 +69,12 @@ def encode_node_birth(timestamp: int, bd_seq: int, extra: Iterable[tuple[MetricD
     return payload.SerializeToString()
 
 
-def encode_device_birth(timestamp: int, seq: int, metrics: Iterable[Change]) -> bytes:
-    """A DBIRTH: every metric of the device with name, alias, datatype, value, properties (§6.4.19)."""
+def encode_device_birth(timestamp: int, seq: int, metrics: Iterable[Change], *, properties: bool = True) -> bytes:
+    """A DBIRTH: every metric of the device with name, alias, datatype, value and (`properties`) unit, range, description, read-only."""
     payload = pb.Payload(timestamp=timestamp, seq=seq)
     add = payload.metrics.add
     for definition, value, quality, stamp in metrics:
-        _fill_birth(add(), definition, value, quality, stamp)
+        _fill_birth(add(), definition, value, quality, stamp, properties)
     return payload.SerializeToString()
 
 
@@ -107,14 +107,14 @@ def encode_device_death(timestamp: int, seq: int) -> bytes:
     return pb.Payload(timestamp=timestamp, seq=seq).SerializeToString()
 
 
-def as_historical(raw: bytes, definitions: Mapping[str, MetricDefinition], timestamp: int, seq: int, *, by_alias: bool) -> tuple[bytes, int]:
-    """A stored data payload (metrics by name, no seq) made ready to forward: historical, numbered, by alias.
+def as_historical(raw: bytes, definitions: Mapping[str, MetricDefinition], timestamp: int, *, by_alias: bool) -> tuple[Any, int]:
+    """A stored data payload (metrics by name, no seq) made ready to forward: historical, by alias; the caller numbers it.
 
     Metrics the device no longer has (the configuration changed meanwhile) are left out; returns
-    the payload and how many metrics it kept.
+    the payload (a pb.Payload without seq) and how many metrics it kept.
     """
     stored = decode(raw)
-    payload = pb.Payload(timestamp=timestamp, seq=seq)
+    payload = pb.Payload(timestamp=timestamp)
     kept = 0
     for metric in stored.metrics:
         definition = definitions.get(metric.name)
@@ -127,7 +127,7 @@ def as_historical(raw: bytes, definitions: Mapping[str, MetricDefinition], times
             copy.ClearField("name")
             copy.alias = definition.alias
         kept += 1
-    return payload.SerializeToString(), kept
+    return payload, kept
 
 
 def command_value(definition: MetricDefinition, metric: Any) -> Any:
@@ -158,7 +158,7 @@ def command_value(definition: MetricDefinition, metric: Any) -> Any:
 # -- inside -------------------------------------------------------------------------------------
 
 
-def _fill_birth(metric: Any, definition: MetricDefinition, value: Any, quality: int | None, stamp: int) -> None:
+def _fill_birth(metric: Any, definition: MetricDefinition, value: Any, quality: int | None, stamp: int, described: bool = True) -> None:
     metric.name = definition.name
     if definition.alias is not None:
         metric.alias = definition.alias
@@ -166,6 +166,10 @@ def _fill_birth(metric: Any, definition: MetricDefinition, value: Any, quality: 
     metric.datatype = int(definition.datatype)
     _set_value(metric, definition.datatype, value)
     properties = metric.properties
+    if quality is not None:
+        _property(properties, "Quality", _INT32, int_value=quality)
+    if not described:
+        return
     if definition.unit:
         _property(properties, "engUnit", _STRING, string_value=definition.unit)
     if definition.low is not None:
@@ -175,8 +179,6 @@ def _fill_birth(metric: Any, definition: MetricDefinition, value: Any, quality: 
     if definition.description:
         _property(properties, "documentation", _STRING, string_value=definition.description)
     _property(properties, "readOnly", _BOOLEAN, boolean_value=definition.read_only)
-    if quality is not None:
-        _property(properties, "Quality", _INT32, int_value=quality)
 
 
 def _set_value(metric: Any, datatype: SparkplugType, value: Any) -> None:
