@@ -75,6 +75,8 @@ class CommandDoor:
         if target is None:
             return
         kind, device_id = target
+        if not raw:
+            return  # a zero-length message clears a retained one at the broker: no command
         device = self.devices.get(device_id) if device_id is not None else None
         origin = self.origin(device)
         if kind == "DCMD" and device is None:
