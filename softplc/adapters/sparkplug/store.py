@@ -19,6 +19,7 @@ import struct
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
+from collections.abc import Iterator
 from typing import BinaryIO
 
 log = logging.getLogger(__name__)
@@ -149,7 +150,7 @@ class Store:
         log.warning("Sparkplug store: full (%d bytes at most): the oldest %d data messages were dropped", self.max_size, lost)
 
     @staticmethod
-    def _records(path: Path):  # type: ignore[no-untyped-def]
+    def _records(path: Path) -> Iterator[tuple[str, bytes, int]]:
         """(device, payload, end offset) of each whole record of a segment."""
         data = path.read_bytes()
         offset = 0
