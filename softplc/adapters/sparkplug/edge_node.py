@@ -43,9 +43,12 @@ log = logging.getLogger(__name__)
 
 QUALITY_CODES = {Quality.GOOD: QUALITY_GOOD, Quality.BAD: QUALITY_BAD, Quality.UNCERTAIN: QUALITY_STALE}
 FORWARD_BATCH = 20  # historical messages between two looks at live data waiting
+HOLD_PERIOD = 1.0  # seconds of changes gathered into one stored message per device while offline
+HOLD_LIMIT = 5000  # changes gathered at most before they go to the store anyway
 STATUS_PERIOD = 1.0  # seconds between refreshes of the counters in _sys.sparkplug.*
 
 Pending = dict[str, tuple[Any, Quality, float]]  # tag → (value, quality, timestamp) of its last change
+Held = list[tuple[str, tuple[Any, Quality, float]]]  # every change while offline, in order
 
 
 class EdgeNode:
@@ -67,6 +70,8 @@ class EdgeNode:
         self._devices = {device.id: device for device in settings.devices}
         self._pending: Pending = {}
         self._not_good: set[str] = set()  # tags whose last published quality was not GOOD
+        self._held: Held = []  # changes while offline, gathered for the store
+        self._held_since = 0.0
         self._wake = asyncio.Event()
         self._rebirth = False
         self._host: HostState | None = None  # the primary host's last valid STATE
@@ -134,7 +139,8 @@ class EdgeNode:
             except NotConnected:
                 pass
         else:
-            self._keep_all(changes)
+            self._hold(changes)
+            self._flush_held()
         self.born = False
         await self.connection.close()
         for task in self._tasks:
@@ -256,13 +262,14 @@ class EdgeNode:
             if self.born:
                 await self._publish_data(changes)
             else:
-                self._keep_all(changes)
+                self._hold(changes)
         if self.born and self.store is not None and self.store.count:
             await self._forward()
             if self.store.count:
                 self._wake.set()  # more to forward at the next turn (live data goes in between)
 
     async def _birth(self) -> None:
+        self._flush_held()  # what changed while offline is forwarded after the births
         self._rebirth = False
         self._pending.clear()  # the births carry the current values
         now = self.now_ms()
@@ -303,10 +310,10 @@ class EdgeNode:
                 raise
             self.status.metrics += len(batch)
 
-    def _batches(self, changes: Pending) -> list[tuple[Device, list[payloads.Change]]]:
+    def _batches(self, changes: Pending | Held) -> list[tuple[Device, list[payloads.Change]]]:
         by_device: dict[str, tuple[Device, list[payloads.Change]]] = {}
         metric_of = self._metric_of
-        for name, (value, quality, stamp) in changes.items():
+        for name, (value, quality, stamp) in changes.items() if isinstance(changes, dict) else changes:
             device, definition = metric_of[name]
             entry = by_device.get(device.id)
             if entry is None:
@@ -324,7 +331,21 @@ class EdgeNode:
             return QUALITY_GOOD
         return None
 
-    def _keep_all(self, changes: Pending) -> None:
+    def _hold(self, changes: Pending) -> None:
+        """Offline: gather the changes (all of them, in order), into the store once a second."""
+        now = self.plant.clock.now()
+        if not self._held:
+            self._held_since = now
+        self._held.extend(changes.items())
+        if now - self._held_since >= HOLD_PERIOD or len(self._held) >= HOLD_LIMIT:
+            self._flush_held()
+
+    def _flush_held(self) -> None:
+        held, self._held = self._held, []
+        if held:
+            self._keep_all(held)
+
+    def _keep_all(self, changes: Pending | Held) -> None:
         for device, batch in self._batches(changes):
             self._keep(device, batch)
 
@@ -381,6 +402,8 @@ class EdgeNode:
     async def _status_loop(self) -> None:
         while True:
             await self.plant.clock.sleep(STATUS_PERIOD)
+            if self._held and self.plant.clock.now() - self._held_since >= HOLD_PERIOD:
+                self._flush_held()  # nothing changed for a while: what was gathered goes to disk all the same
             self._refresh()
 
     def _refresh(self) -> None:
