@@ -20,6 +20,7 @@ from softplc.config import load_config
 from softplc.core.clock import RealClock
 from softplc.core.tagdb import Origin, Rule, WriteEvent
 from softplc.core.tags import Quality
+from softplc.protocols.sparkplug import sparkplug_b_pb2 as pb
 from tests.sparkplug_support import SparkplugHost, check_seq, metric
 
 PLANT = """\
@@ -169,11 +170,22 @@ async def test_rebirth_and_dcmd_writes_go_through_the_rules_roles_and_audit(mosq
         unknown, valid = await dcmd("t01", {"name": "iFx", "datatype": "FLOAT", "value": 1.0}, {"name": "iBM", "datatype": "UINT16", "value": 99})
         assert (unknown.rule, unknown.tag) == (Rule.UNKNOWN_TAG, "t01/iFx") and "did you mean 'iFr'" in unknown.detail
         assert valid.rule is not None and valid.detail.startswith("not applied: t01/iFx")  # never half a command
+        [event] = await dcmd("t01", {"alias": 9999, "datatype": "UINT16", "value": 1})
+        assert (event.rule, event.tag) == (Rule.UNKNOWN_TAG, "t01/alias 9999")
         [event] = await dcmd("t01", {"name": "iBM", "datatype": "UINT16", "value": 55}, timestamp=int(time.time() * 1000) - 3_600_000)
         assert event.rule is Rule.INVALID_REQUEST and "from a time the edge node was dead" in event.detail
         await _tick(0.2)
         assert runtime.db.snapshot(["t01_iFr", "t01_iBM", "t01_iBL", "panel_setpoint"]) == {
             "t01_iFr": 20.0, "t01_iBM": 12, "t01_iBL": 0.0, "panel_setpoint": 0.0}
+
+        # An NCMD may only ask for a rebirth: the node's bdSeq and unknown metrics are refused.
+        ncmd = pb.Payload(timestamp=int(time.time() * 1000))
+        ncmd.metrics.add(name="bdSeq", datatype=4, long_value=7)
+        ncmd.metrics.add(name="Node Control/Reboot", datatype=11, boolean_value=True)
+        before = len(writes)
+        await host.send({"op": "raw", "topic": "spBv1.0/plant1/NCMD/line1", "hex": ncmd.SerializeToString().hex()})
+        await _until(lambda: len(writes) >= before + 2)
+        assert [(w.tag, w.rule) for w in writes[before:]] == [("bdSeq", Rule.READ_ONLY), ("line1/Node Control/Reboot", Rule.UNKNOWN_TAG)]
 
         # Bytes that are no payload, many times: refused and audited each time, logged once.
         caplog.set_level(logging.WARNING, logger="softplc.adapters.sparkplug.commands")
@@ -194,7 +206,7 @@ async def test_rebirth_and_dcmd_writes_go_through_the_rules_roles_and_audit(mosq
         await host.wait(lambda e: e["type"] == "DBIRTH" and e["device"] == "line", since=mark, what="the DBIRTHs after Rebirth")
         assert metric(birth_of(host, "t01"), "iFr")["value"] == 20.0
         assert any(call.command == "sparkplug.rebirth" and call.accepted for call in calls)
-        await _until(lambda: runtime.db.value("_sys.sparkplug.births") == 2 and runtime.db.value("_sys.sparkplug.refused") >= 28)
+        await _until(lambda: runtime.db.value("_sys.sparkplug.births") == 2 and runtime.db.value("_sys.sparkplug.refused") >= 31)
         assert "not a Sparkplug B payload" in runtime.db.value("_sys.sparkplug.last_refusal")
         check_seq(host.events, "line1")
     finally:

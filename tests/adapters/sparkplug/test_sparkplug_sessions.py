@@ -88,8 +88,13 @@ async def test_while_the_primary_host_is_offline_data_is_stored_and_forwarded_hi
     host = await SparkplugHost.start(mosquitto.port, "plant1", host_id="scada")
     runtime = await start_plant(tmp_path, mosquitto.port, extra="primary_host: scada\n")
     try:
+        writes: list = []
+        runtime.db.on_write(writes.extend)
         await until(lambda: runtime.db.value("_sys.sparkplug.state") == "waiting for primary host", what="waiting for the host")
         assert not host.of("NBIRTH")  # no birth before the primary host is online (§5.6)
+        await host.send({"op": "dcmd", "node": "line1", "device": "line", "metrics": [{"name": "total", "datatype": "DOUBLE", "value": 1.0}]})
+        await until(lambda: len(writes) == 1, what="the command to an unborn node refused")
+        assert writes[0].rule is not None and "not online" in writes[0].detail and runtime.db.value("total") == 0.0
         await host.send({"op": "state", "online": True})
         nbirth = await host.wait(lambda e: e["type"] == "NBIRTH", what="the births once the host is online")
         assert nbirth["bdSeq"] == 0
