@@ -22,6 +22,7 @@ import logging
 from typing import Any
 
 from softplc.adapters.sparkplug import status as states
+from softplc.adapters.sparkplug.changes import Changes, Held, Pending
 from softplc.adapters.sparkplug.commands import CommandDoor
 from softplc.adapters.sparkplug.settings import Device, SparkplugSettings
 from softplc.adapters.sparkplug.status import Status
@@ -29,26 +30,19 @@ from softplc.adapters.sparkplug.store import Store
 from softplc.core.commands import CommandRefused, Permission
 from softplc.core.plant import Plant
 from softplc.core.tagdb import Origin
-from softplc.core.tags import Quality, Tag
 from softplc.protocols.mqtt import MqttConnection, NotConnected, Will
 from softplc.protocols.mqtt_settings import MqttSettings
 from softplc.protocols.sparkplug import payloads
-from softplc.protocols.sparkplug.datatypes import QUALITY_BAD, QUALITY_GOOD, QUALITY_STALE
-from softplc.protocols.sparkplug.metrics import MetricDefinition
 from softplc.protocols.sparkplug.sequence import BirthDeathSequence, MessageSequence
 from softplc.protocols.sparkplug.topics import HostState, device_topic, node_topic, parse_state, state_topic
 from softplc.util.peers import PeerLog
 
 log = logging.getLogger(__name__)
 
-QUALITY_CODES = {Quality.GOOD: QUALITY_GOOD, Quality.BAD: QUALITY_BAD, Quality.UNCERTAIN: QUALITY_STALE}
 FORWARD_BATCH = 20  # historical messages between two looks at live data waiting
 HOLD_PERIOD = 1.0  # seconds of changes gathered into one stored message per device while offline
 HOLD_LIMIT = 5000  # changes gathered at most before they go to the store anyway
 STATUS_PERIOD = 1.0  # seconds between refreshes of the counters in _sys.sparkplug.*
-
-Pending = dict[str, tuple[Any, Quality, float]]  # tag → (value, quality, timestamp) of its last change
-Held = list[tuple[str, tuple[Any, Quality, float]]]  # every change while offline, in order
 
 
 class EdgeNode:
@@ -64,12 +58,9 @@ class EdgeNode:
         self.birth_timestamp = 0
         self.bd_seq = 0  # of the current session (the will registered at its CONNECT)
         self.seq = MessageSequence()
-        self._metric_of: dict[str, tuple[Device, MetricDefinition]] = {
-            tag: (device, definition) for device in settings.devices for tag, definition in device.metrics.items()}
+        self.changes = Changes(settings.devices)
         self._definitions = {device.id: {d.name: d for d in device.metrics.values()} for device in settings.devices}
         self._devices = {device.id: device for device in settings.devices}
-        self._pending: Pending = {}
-        self._not_good: set[str] = set()  # tags whose last published quality was not GOOD
         self._held: Held = []  # changes while offline, gathered for the store
         self._held_since = 0.0
         self._wake = asyncio.Event()
@@ -101,8 +92,8 @@ class EdgeNode:
         if settings.primary_host:
             self.connection.subscribe(state_topic(settings.primary_host), self._host_state, qos=1)
         self._undo = [
-            plant.tags.on_change(self._changed),
-            plant.after_cycle(lambda task: self._wake.set() if self._pending else None),
+            plant.tags.on_change(self.changes.note),
+            plant.after_cycle(lambda task: self._wake.set() if self.changes.pending else None),
             plant.commands.register("sparkplug.rebirth", self._rebirth_command, permission=Permission.VIEW, audited=True,
                                     description="publish the Sparkplug B births again"),
             plant.commands.register("sparkplug.status", lambda arguments, origin: self.describe_state(), permission=Permission.VIEW,
@@ -127,7 +118,7 @@ class EdgeNode:
                 await asyncio.wait_for(asyncio.shield(publisher), timeout=5.0)  # let it finish the message it is sending
             except (asyncio.TimeoutError, asyncio.CancelledError):
                 publisher.cancel()
-        changes, self._pending = self._pending, {}
+        changes = self.changes.take()
         if self.born:
             try:
                 await self._publish_data(changes)
@@ -155,7 +146,7 @@ class EdgeNode:
     def describe(self) -> str:
         host = f", primary host {self.settings.primary_host}" if self.settings.primary_host else ""
         return (f"Sparkplug B edge node {self.settings.group_id}/{self.settings.edge_node_id} on {self.mqtt.url} "
-                f"({len(self.settings.devices)} devices, {len(self._metric_of)} metrics{host})")
+                f"({len(self.settings.devices)} devices, {len(self.changes.metric_of)} metrics{host})")
 
     def metrics(self) -> dict[str, Any]:
         return self.status.figures()
@@ -225,15 +216,6 @@ class EdgeNode:
 
     # -- data ----------------------------------------------------------------------------------
 
-    def _changed(self, tags: Any) -> None:
-        """A tag-change batch (on the loop, in the scan's path): note each metric's last change, in order."""
-        metric_of, pending = self._metric_of, self._pending
-        for tag in tags:
-            name = tag.definition.name
-            if name in metric_of:
-                pending.pop(name, None)  # moved to the end: the message lists changes in the order they happened
-                pending[name] = (tag.value, tag.quality, tag.timestamp)
-
     async def _publisher(self) -> None:
         while not self._stopping:
             await self._wake.wait()
@@ -257,7 +239,7 @@ class EdgeNode:
         host_online = not self.settings.primary_host or (self._host is not None and self._host.online)
         if connection.connected and ((not self.born and host_online) or (self.born and self._rebirth)):
             await self._birth()
-        changes, self._pending = self._pending, {}
+        changes = self.changes.take()
         if changes:
             if self.born:
                 await self._publish_data(changes)
@@ -271,19 +253,12 @@ class EdgeNode:
     async def _birth(self) -> None:
         self._flush_held()  # what changed while offline is forwarded after the births
         self._rebirth = False
-        self._pending.clear()  # the births carry the current values
         now = self.now_ms()
         self.birth_timestamp = now
         group, node = self.settings.group_id, self.settings.edge_node_id
-        tags = self.plant.tags
         self.seq.birth()
         messages = [(self._topic("NBIRTH"), payloads.encode_node_birth(now, self.bd_seq))]
-        self._not_good = set()
-        for device in self.settings.devices:
-            metrics = []
-            for name, definition in device.metrics.items():
-                tag: Tag = tags[name]
-                metrics.append((definition, tag.value, self._quality(name, tag.quality, birth=True), round(tag.timestamp * 1000)))
+        for device, metrics in self.changes.births(self.plant.tags):  # the current values: nothing left pending
             messages.append((device_topic(group, "DBIRTH", node, device.id),
                              payloads.encode_device_birth(now, self.seq.next(), metrics, properties=self.settings.properties)))
         for topic, payload in messages:
@@ -293,11 +268,11 @@ class EdgeNode:
         self.status.state = states.ONLINE
         self._refresh()
         log.info("Sparkplug B: edge node %s/%s born (bdSeq %d, %d devices, %d metrics)", group, node, self.bd_seq,
-                 len(self.settings.devices), len(self._metric_of))
+                 len(self.settings.devices), len(self.changes.metric_of))
 
     async def _publish_data(self, changes: Pending) -> None:
         """One DDATA per device with its changes; what cannot be sent any more goes to the store."""
-        batches = self._batches(changes)
+        batches = self.changes.batches(changes)
         now = self.now_ms()
         group, node, by_alias = self.settings.group_id, self.settings.edge_node_id, self.settings.aliases
         for index, (device, batch) in enumerate(batches):
@@ -309,27 +284,6 @@ class EdgeNode:
                     self._keep(later_device, later_batch)
                 raise
             self.status.metrics += len(batch)
-
-    def _batches(self, changes: Pending | Held) -> list[tuple[Device, list[payloads.Change]]]:
-        by_device: dict[str, tuple[Device, list[payloads.Change]]] = {}
-        metric_of = self._metric_of
-        for name, (value, quality, stamp) in changes.items() if isinstance(changes, dict) else changes:
-            device, definition = metric_of[name]
-            entry = by_device.get(device.id)
-            if entry is None:
-                entry = by_device[device.id] = (device, [])
-            entry[1].append((definition, value, self._quality(name, quality), round(stamp * 1000)))
-        return list(by_device.values())
-
-    def _quality(self, name: str, quality: Quality, *, birth: bool = False) -> int | None:
-        """The Quality property to send with a value: when it is not GOOD, and once when it is GOOD again."""
-        if quality is not Quality.GOOD:
-            self._not_good.add(name)
-            return QUALITY_CODES[quality]
-        if not birth and name in self._not_good:
-            self._not_good.discard(name)
-            return QUALITY_GOOD
-        return None
 
     def _hold(self, changes: Pending) -> None:
         """Offline: gather the changes (all of them, in order), into the store once a second."""
@@ -346,7 +300,7 @@ class EdgeNode:
             self._keep_all(held)
 
     def _keep_all(self, changes: Pending | Held) -> None:
-        for device, batch in self._batches(changes):
+        for device, batch in self.changes.batches(changes):
             self._keep(device, batch)
 
     def _keep(self, device: Device, batch: list[payloads.Change]) -> None:
@@ -373,9 +327,8 @@ class EdgeNode:
                 sent += 1
                 if self._rebirth or self._host_lost or self._stopping:
                     break
-                if sent % FORWARD_BATCH == 0 and self._pending:
-                    changes, self._pending = self._pending, {}
-                    await self._publish_data(changes)
+                if sent % FORWARD_BATCH == 0 and self.changes.pending:
+                    await self._publish_data(self.changes.take())
         finally:
             self.store.forwarded(sent)
 
