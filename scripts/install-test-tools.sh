@@ -39,3 +39,10 @@ if [ -f tests/node/package.json ] && [ ! -d tests/node/node_modules/node-opcua-c
     trouble "npm install in tests/node failed (node-opcua)"
   fi
 fi
+# The Sparkplug B tests' independent host (tests/sparkplug/host.py) is pysparkplug, which needs
+# paho-mqtt < 2 while softplc's aiomqtt needs 2: it gets a virtualenv of its own.
+if [ ! -x tests/sparkplug/.venv/bin/python ] || ! tests/sparkplug/.venv/bin/python -c 'import pysparkplug' 2>/dev/null; then
+  { python3 -m venv tests/sparkplug/.venv \
+      && tests/sparkplug/.venv/bin/pip install --quiet --disable-pip-version-check pysparkplug==0.6.1 paho-mqtt==1.6.1; } \
+    || echo "warning: could not make tests/sparkplug/.venv (pysparkplug); the Sparkplug host tests will say so" >&2
+fi

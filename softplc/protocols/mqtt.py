@@ -12,6 +12,10 @@ every filter again, and calls `on_state(True)` so its user can publish what a ne
 (a retained ONLINE, a Sparkplug birth). The last will is asked for at each connect (`will()`),
 so it can carry what changes per session (Sparkplug's bdSeq). An incoming payload larger than
 `max_payload` is dropped with one log line per topic and minute, never handed on.
+
+`restart(reason)` ends the session with a clean DISCONNECT (the broker drops the last will) and
+connects again at once, without the backoff: what a Sparkplug edge node must do when its
+primary host goes offline (it publishes its NDEATH itself first).
 """
 
 from __future__ import annotations
@@ -75,6 +79,7 @@ class MqttConnection:
         self._state_listeners: list[Callable[[bool], None]] = []
         self._peer_log = PeerLog(log, service="MQTT")
         self._closing = False
+        self._restarting = ""  # why the current session is being ended on purpose
 
     # -- what users call ---------------------------------------------------------------------
 
@@ -119,12 +124,28 @@ class MqttConnection:
                 self._set_state(False)
             if self._closing:
                 return
+            if self._restarting:
+                log.info("MQTT %s: reconnecting (%s)", self.client_id, self._restarting)
+                self._restarting = ""
+                delay = 1.0
+                continue
             if time.monotonic() - began > 2 * delay:
                 delay = 1.0  # it was up for a while: the next outage starts from a short wait again
             self._peer_log.warning(self.settings.url, "lost connections", "MQTT %s: broker %s unreachable (%s); retrying in %g s",
                                    self.client_id, self.settings.url, self.last_error or "closed", delay)
             await self.clock.sleep(delay)
             delay = min(delay * 2, self.max_backoff)
+
+    async def restart(self, reason: str) -> None:
+        """End the current session cleanly (no last will) and connect again at once; nothing while disconnected."""
+        client = self._client
+        if client is None or self._closing:
+            return
+        self._restarting = reason
+        try:
+            await client.__aexit__(None, None, None)
+        except Exception:  # already gone: run() reconnects all the same
+            pass
 
     async def close(self) -> None:
         """Disconnect cleanly (the broker publishes no last will); `run()` then returns."""

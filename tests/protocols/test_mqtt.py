@@ -83,3 +83,37 @@ def test_the_settings_come_from_the_mqtt_section(make_config, tmp_path: Path) ->
     settings = MqttSettings.from_config(config)
     assert (settings.host, settings.port, settings.tls is not None, settings.keepalive, settings.protocol) == ("broker.example", 8884, True, 20.0, "3.1.1")
     assert settings.client_id == "softplc-line1" and settings.password() == "secret" and settings.url == "mqtts://broker.example:8884"
+
+
+async def test_a_restart_reconnects_at_once_without_the_will_and_asks_for_a_new_one(mosquitto) -> None:
+    settings = MqttSettings(port=mosquitto.port)
+    wills: list[int] = []
+
+    def will() -> Will:
+        wills.append(len(wills))
+        return Will("node/death", str(wills[-1]).encode(), qos=1)
+
+    node = MqttConnection(settings, "node", RealClock(), will=will)
+    watcher = MqttConnection(settings, "watcher", RealClock())
+    seen: list[tuple[str, bytes]] = []
+    states: list[bool] = []
+    watcher.subscribe("node/#", lambda topic, payload, retained: seen.append((topic, payload)), qos=1)
+    node.on_state(states.append)
+    tasks = [asyncio.create_task(node.run()), asyncio.create_task(watcher.run())]
+    try:
+        await until(lambda: node.connected and watcher.connected, what="both connected")
+        began = asyncio.get_running_loop().time()
+        await node.restart("the primary host went offline")
+        await until(lambda: node.connects == 2 and node.connected, what="the node connected again")
+        assert asyncio.get_running_loop().time() - began < 1.0  # at once: no backoff
+        assert states == [True, False, True] and wills == [0, 1]
+        # The broker publishes a will as the old session ends, before it serves the new one: had
+        # there been one, the watcher would see it before this message of the new session.
+        await node.publish("node/alive", b"", qos=1)
+        await until(lambda: ("node/alive", b"") in seen, what="the new session's message")
+        assert seen == [("node/alive", b"")]  # a clean DISCONNECT: no will
+    finally:
+        for task in tasks:
+            task.cancel()
+        await node.close()
+        await watcher.close()

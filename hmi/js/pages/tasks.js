@@ -6,6 +6,7 @@ import { el, setText } from '../dom.js';
 import { get, tagMeta } from '../api.js';
 import { formatNumber } from '../format.js';
 import { decoratePrograms } from '../ops/programs.js';
+import { mountSparkplug } from './sparkplug_panel.js';
 
 const SERIES = [['scan', 'scan time'], ['cycle', 'cycle time'], ['latency', 'start latency']];
 const STATS = ['min', 'mean', 'p99', 'max'];
@@ -96,6 +97,7 @@ export async function mount(root, ctx) {
   const watch = ctx.live.watch([...cells.keys()], update);
   update([...cells.keys()]);
   const undecorate = await decoratePrograms(root, ctx, model);  // start / stop / restart, online change (engineers)
+  const unmountSparkplug = await mountSparkplug(runtime, ctx);  // the Sparkplug B edge node, when the plant has one
   root.dataset.ready = '1';
-  return () => { watch.close(); undecorate(); };
+  return () => { watch.close(); undecorate(); unmountSparkplug(); };
 }
