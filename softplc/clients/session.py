@@ -143,7 +143,14 @@ class LiveSession:
         return list(dict.fromkeys(names))
 
     async def match(self, patterns: list[str]) -> list[str]:
-        """The tags matching any of the globs (`t01_*`, `r0?_xpos`), in pattern order; raises UnknownTags for one that matches none."""
+        """The tags matching any of the globs (`t01_*`, `r0?_xpos`), in pattern order; raises UnknownTags for one that matches none.
+
+        Exact names alone are returned as given, without browsing: a browse of the whole
+        address space holds the server's loop for a while (0.15-0.4 s per level with 1,000
+        alarm conditions), and `read`/`describe` name an unknown tag anyway (UnknownTags).
+        """
+        if not any(_is_glob(pattern) for pattern in patterns):
+            return list(dict.fromkeys(patterns))
         names = await self.tag_names()
         chosen: dict[str, None] = {}
         unmatched = []

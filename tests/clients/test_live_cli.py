@@ -97,6 +97,32 @@ async def test_read_of_an_unknown_tag_names_it_with_a_hint(plant, tmp_path: Path
     assert err.strip() == "softplc read: no such tag 'f33' (did you mean 'f32'?); no such tag 'r9*' (no tag matches this pattern)"
 
 
+async def test_reading_exact_names_browses_nothing_a_pattern_does(plant, tmp_path: Path) -> None:
+    # A browse of the whole address space holds the server's loop (0.15-0.4 s a level with
+    # 1,000 alarm conditions): exact names are read at once, only a pattern needs the names.
+    _, server = plant
+    view = server.server.iserver.view_service
+    browse = view.browse
+    browsed: list[int] = []
+
+    def counting(parameters: Any) -> Any:
+        browsed.append(len(parameters.NodesToBrowse))
+        return browse(parameters)
+
+    view.browse = counting
+    code, out, err = await softplc("read", "i32", "s1", "--endpoint", server.endpoint, home=tmp_path)
+    assert code == 0, err
+    assert list(table(out)) == ["i32", "s1"]
+    assert browsed == []
+    code, out, err = await softplc("read", "i3?", "--endpoint", server.endpoint, home=tmp_path)
+    assert code == 0, err
+    assert list(table(out)) == ["i32"] and browsed
+    browsed.clear()
+    code, out, err = await softplc("read", "i32", "f33", "--endpoint", server.endpoint, home=tmp_path)
+    assert (code, out) == (1, "")  # an unknown exact name is still named, with the hint the names give
+    assert err.strip() == "softplc read: no such tag 'f33' (did you mean 'f32'?)"
+
+
 async def test_write_is_applied_and_typed_text_is_parsed_by_the_tag_type(plant, tmp_path: Path) -> None:
     runtime, server = plant
     code, out, err = await softplc("write", "request=12", "b1=on", "f32=0.1", "s1=a=b", "--user", "operator",

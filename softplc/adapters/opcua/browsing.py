@@ -6,6 +6,11 @@ BrowseNext. `GuardedProcessor` (transport.py) passes each Browse result through
 holds back the rest under a random continuation point; BrowseNext hands them out page by
 page, or releases them. Points belong to the session (at most `MAX_CONTINUATION_POINTS`; a
 further one is refused with BadNoContinuationPoints) and die with it.
+
+`SubtypeCachingViewService` answers Browse like asyncua's ViewService, but remembers whether
+one reference type is a subtype of another: asyncua walks the whole subtype tree for every
+reference of every browsed node (~40 µs a reference; 1,000 alarm conditions held the loop
+0.15-0.4 s per browsed level), the cache ~2 µs.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ import secrets
 from dataclasses import dataclass
 
 from asyncua import ua
+from asyncua.server.address_space import AddressSpace, ViewService
 
 MAX_CONTINUATION_POINTS = 10  # per session; advertised as ServerCapabilities.MaxBrowseContinuationPoints
 
@@ -66,3 +72,19 @@ class ContinuationPoints:
         point = secrets.token_bytes(16)
         self._held[point] = _Held(rest, page_size)
         result.ContinuationPoint = point
+
+
+class SubtypeCachingViewService(ViewService):
+    """asyncua's Browse, with "is reference type B a subtype of A" remembered (the types never change once served)."""
+
+    def __init__(self, aspace: AddressSpace) -> None:
+        super().__init__(aspace)
+        self._suitable: dict[tuple[ua.NodeId, ua.NodeId, bool], bool] = {}
+
+    def _suitable_reftype(self, ref1: ua.NodeId, ref2: ua.NodeId, subtypes: bool) -> bool:
+        key = (ref1, ref2, subtypes)
+        suitable = self._suitable.get(key)
+        if suitable is None:
+            # Bounded: keys are pairs of reference types (a few dozen), whatever the clients ask.
+            suitable = self._suitable[key] = super()._suitable_reftype(ref1, ref2, subtypes)
+        return suitable

@@ -32,7 +32,7 @@ from asyncua.common.callback import CallbackType
 
 from softplc import __version__
 from softplc.adapters.opcua.address_space import AddressSpaceBuilder, plan_folders, tag_node_id
-from softplc.adapters.opcua.browsing import MAX_CONTINUATION_POINTS
+from softplc.adapters.opcua.browsing import MAX_CONTINUATION_POINTS, SubtypeCachingViewService
 from softplc.adapters.opcua.commands import CommandsDoor  # the door to plant.commands
 from softplc.adapters.opcua.conditions import AlarmConditions  # Part 9 conditions
 from softplc.adapters.opcua.history import MAX_NODES_PER_HISTORY_READ, HistoryProvider, NoHistory, TagHistoryService
@@ -163,6 +163,7 @@ class OpcUaServer:
     async def _build_server(self, server: Server, plant: Plant) -> None:
         settings = self.settings
         await server.init()
+        server.iserver.view_service = SubtypeCachingViewService(server.iserver.aspace)  # Browse without re-walking type trees
         await server.set_application_uri(settings.application_uri)
         await server.set_build_info("urn:softplc", "softplc", "softplc", __version__, __version__, datetime.now(timezone.utc))
         # Advertise the request limits the Write service enforces, so clients split big requests.

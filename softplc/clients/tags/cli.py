@@ -191,6 +191,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
         from softplc.clients.tags.watch import WatchEnded, watch
 
         tags = await live.match(args.patterns)
+        await live.read(tags)  # exact names come back unbrowsed: an unknown one is named here (UnknownTags)
         try:
             reason = await watch(live, tags, sys.stdout, endpoint=live.client.server_url.geturl(), interval_ms=args.interval)
         except WatchEnded as ended:

@@ -303,3 +303,28 @@ async def test_browse_honours_max_references_with_continuation_points(plant, ope
     # asyncua's own client follows continuation points by itself.
     children = await operator.get_node(folder).get_children()
     assert [child.nodeid for child in children] == [ref.NodeId for ref in everything.References]
+
+
+async def test_browse_answers_like_asyncua_for_every_node_and_reference_filter(plant, operator) -> None:
+    # The server remembers which reference types are subtypes of which (browsing.py); what a
+    # client gets must stay what asyncua's own ViewService, walking the type tree, would answer.
+    from asyncua.server.address_space import ViewService
+
+    _, server = plant
+    aspace = server.server.iserver.aspace
+    walking = ViewService(aspace)
+    filters = [(ua.ObjectIds.HierarchicalReferences, True), (ua.ObjectIds.HierarchicalReferences, False),
+               (ua.ObjectIds.Organizes, True), (ua.ObjectIds.HasChild, True), (ua.ObjectIds.HasComponent, False),
+               (ua.ObjectIds.NonHierarchicalReferences, True), (ua.ObjectIds.Null, False)]
+    nodes = [node_id for node_id in aspace.keys() if node_id.NamespaceIndex == await _ns(operator)][:200]
+    nodes += [ua.NodeId(ua.ObjectIds.ObjectsFolder), ua.NodeId(ua.ObjectIds.Server), ua.NodeId(ua.ObjectIds.RootFolder)]
+    for reference_type, subtypes in filters:
+        descriptions = [ua.BrowseDescription(NodeId=node_id, BrowseDirection=ua.BrowseDirection.Both,
+                                             ReferenceTypeId=ua.NodeId(reference_type), IncludeSubtypes=subtypes,
+                                             ResultMask=ua.BrowseResultMask.All) for node_id in nodes]
+        served = await operator.uaclient.browse(ua.BrowseParameters(NodesToBrowse=descriptions))
+        expected = walking.browse(ua.BrowseParameters(NodesToBrowse=descriptions))
+        assert [[(r.NodeId, r.ReferenceTypeId, r.IsForward) for r in result.References] for result in served] == \
+               [[(r.NodeId, r.ReferenceTypeId, r.IsForward) for r in result.References] for result in expected]
+        if subtypes:  # found only through the type tree: what the cache answers
+            assert sum(len(result.References) for result in served) > 0
