@@ -167,7 +167,8 @@ class ProcessWriter:
         self._started_at = time.monotonic()
         with _normal_scheduling():  # a replacement is started by the sender, which may run at SCHED_FIFO
             process = subprocess.Popen([sys.executable, "-m", "softplc.storage.child"], stdin=subprocess.PIPE,
-                                       stdout=subprocess.PIPE, env=environment)
+                                       stdout=subprocess.PIPE, env=environment,
+                                       process_group=0)  # Ctrl-C reaches the terminal's group, not it: it ends with its stdin
         assert process.stdin is not None and process.stdout is not None
         setup = {"settings": self.database.settings, "flush_period": self.flush_period, "name": self.name,
                  "max_pending": self.max_pending, "maintain_period": self.maintain_period, "sinks": self._sinks,

@@ -25,7 +25,7 @@ from softplc.app.runtime import Runtime
 from softplc.storage import BatchWriter, Database, StorageSettings
 from softplc.core.tagdb import Origin
 from tests.conftest import REPO
-from tests.test_storage_unwritable import journal_entry
+from tests.storage.test_storage_unwritable import journal_entry
 
 SUPPORT = REPO / "tests" / "history_support.py"
 VIEWER = Origin("hmi", "viewer", role=Role.VIEWER)
