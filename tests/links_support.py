@@ -67,7 +67,8 @@ class PymodbusRemote:
 
     `holding` / `inputs` are the register values it serves (addresses 0..size-1), changed by the
     test or by clients' writes; `requests` counts the requests by function code; `exceptions`
-    maps an address to the exception code to answer any request touching it; while `hold` is
+    maps a holding register's address to the exception code to answer any request of the holding
+    registers touching it (FC3, FC6, FC16); while `hold` is
     clear, answers wait (a remote that stopped answering without closing the connection).
     """
 
@@ -108,9 +109,10 @@ class PymodbusRemote:
         self.requests[function] += 1
         self.request_log.append((function, address, count))
         await self.hold.wait()
-        for touched in range(address, address + count):
-            if touched in self.exceptions:
-                return self.exceptions[touched]
+        if function in (3, 6, 16):
+            for touched in range(address, address + count):
+                if touched in self.exceptions:
+                    return self.exceptions[touched]
         table = {3: self.holding, 6: self.holding, 16: self.holding, 4: self.inputs}.get(function)
         if table is None:
             return None  # coils and discrete inputs: pymodbus keeps them

@@ -68,6 +68,7 @@ class Link(ABC):
         self.last_data: float | None = None
         self.reconnects = 0
         self.connections = 0
+        self.attempts = 0  # connections tried
         self.requests = 0  # requests sent to the remote (reads, writes, heartbeats)
         self.round_trip = 0.0  # seconds
         self.writes = {"ok": 0, "refused": 0, "failed": 0}
@@ -110,7 +111,9 @@ class Link(ABC):
         try:
             while True:
                 try:
-                    self._set_state(LinkState.CONNECTING)
+                    if self.state is not LinkState.DOWN:  # a retry stays "down" until it succeeds
+                        self._set_state(LinkState.CONNECTING)
+                    self.attempts += 1
                     await self.connect()
                     self._connected()
                     backoff = FIRST_BACKOFF
@@ -329,6 +332,6 @@ class Link(ABC):
             "name": self.name, "protocol": self.settings.protocol, "address": self.settings.address,
             "state": self.state.value, "connected": self.connected, "error": self.error,
             "period_ms": self.settings.period * 1000.0, "tags": len(self.bound), "bad_tags": self._sys.get("bad_tags", 0),
-            "reconnects": self.reconnects, "requests": self.requests, "writes": dict(self.writes),
+            "reconnects": self.reconnects, "attempts": self.attempts, "requests": self.requests, "writes": dict(self.writes),
             "round_trip_ms": round(self.round_trip * 1000.0, 3), "data_age_s": age, "prefix": f"{PREFIX}{self.name}.",
         }
