@@ -123,3 +123,81 @@ class PymodbusRemote:
         for offset in range(count):  # a read: serve our model
             registers[address - start + offset] = table[address + offset]
         return None
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now (for servers that cannot report the port they bound)."""
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+class AsyncuaRemote:
+    """asyncua's own `Server` (default settings) in this process on a free loopback port.
+
+    `add(name, value, variant_type, writable)` adds a variable `ns=2;s=NAME` (in folders of 100:
+    node insertion is O(siblings) in asyncua); `created` lists the sizes of the CreateMonitoredItems
+    requests the server answered (one entry per request).
+    """
+
+    NAMESPACE = "urn:test:remote"
+
+    def __init__(self) -> None:
+        from asyncua import Server
+
+        self.server = Server()
+        self.port = free_port()
+        self.endpoint = f"opc.tcp://127.0.0.1:{self.port}/remote/"
+        self.created: list[int] = []
+        self.index = 0
+        self._folders: list[Any] = []
+        self.nodes: dict[str, Any] = {}
+
+    async def start(self) -> None:
+        from asyncua.common.callback import CallbackType
+
+        await self.server.init()
+        self.server.set_endpoint(self.endpoint)
+        self.index = await self.server.register_namespace(self.NAMESPACE)
+        self.server.subscribe_server_callback(CallbackType.ItemSubscriptionCreated, self._created)
+        await self.server.start()
+
+    async def _created(self, event: Any, dispatcher: Any) -> None:
+        self.created.append(len(event.request_params.ItemsToCreate))
+
+    async def add(self, name: str, value: Any, variant_type: Any, writable: bool = False) -> Any:
+        from asyncua import ua
+
+        if not self._folders or len(self.nodes) >= 100 * len(self._folders):
+            self._folders.append(await self.server.nodes.objects.add_folder(self.index, f"F{len(self._folders)}"))
+        node = await self._folders[-1].add_variable(ua.NodeId(name, self.index), name, ua.Variant(value, variant_type))
+        if writable:
+            await node.set_writable()
+        self.nodes[name] = node
+        return node
+
+    async def set(self, name: str, value: Any, variant_type: Any, status: Any = None) -> None:
+        """Write a DataValue on the server side: any type, any status (a misbehaving remote)."""
+        from asyncua import ua
+
+        data_value = ua.DataValue(ua.Variant(value, variant_type))
+        if status is not None:
+            data_value.StatusCode = ua.StatusCode(status)
+        await self.server.write_attribute_value(self.nodes[name].nodeid, data_value)
+
+    async def retype(self, name: str, value: Any, variant_type: Any) -> None:
+        """Change a node's DataType and value (a remote whose program was changed under the link)."""
+        from asyncua import ua
+
+        nodeid = self.nodes[name].nodeid
+        await self.server.write_attribute_value(nodeid, ua.DataValue(ua.Variant(ua.NodeId(variant_type.value, 0))), ua.AttributeIds.DataType)
+        await self.set(name, None, ua.VariantType.Null, ua.StatusCodes.BadWaitingForInitialData)  # a bad status nulls the value: the new DataType rules
+        await self.set(name, value, variant_type)
+
+    async def value(self, name: str) -> Any:
+        return await self.nodes[name].read_value()
+
+    async def stop(self) -> None:
+        await self.server.stop()

@@ -76,6 +76,7 @@ class Link(ABC):
         self._pending: dict[str, Any] = {}  # tag → the latest local value to send
         self.client_writes: dict[str, tuple[Any, Origin]] = {}  # tag → (value, origin) of a client's write not sent yet
         self._expect: dict[str, tuple[Any, float]] = {}  # both-tag → (value sent, until when a different remote value is stale)
+        self._held: dict[str, Any] = {}  # both-tag → the remote's value received while expecting our write's echo
         self._flushing: asyncio.Task[None] | None = None
         self._wake = asyncio.Event()
         self._sys: dict[str, Any] = {}
@@ -180,8 +181,8 @@ class Link(ABC):
 
     def received(self, changed: list[BoundTag]) -> None:
         """Journal the bound tags whose remote value or verdict changed (the protocol updated them)."""
-        now = self.clock.now()
         if self._expect:
+            now = self.clock.now()
             for bound in changed:
                 expected = self._expect.get(bound.name)
                 if expected is None:
@@ -189,12 +190,34 @@ class Link(ABC):
                 value, until = expected
                 if bound.value == value or now > until:
                     del self._expect[bound.name]
-                else:  # an older value still on its way, from before our write: not the remote's answer to it
+                    self._held.pop(bound.name, None)
+                else:  # a value from before our write, still on its way: kept aside until the write's echo (or the window's end)
+                    self._held[bound.name] = bound.value
                     bound.value = value
         if not self.connected:
             return  # read while connecting: published all at once when the link is up
         self.publisher.publish(changed, self.health())
         self._update_sys()
+
+    def _expecting(self, items: Sequence[tuple[BoundTag, Any]]) -> None:
+        """Before sending: a `both` tag's remote values older than the write are not taken for its answer."""
+        until = self.clock.now() + UNCERTAIN_AFTER * self.settings.period + self.settings.timeout
+        for bound, value in items:
+            if bound.binding.direction.reads:
+                self._expect[bound.name] = (value, until)
+
+    def _expire(self) -> None:
+        """Expectations whose echo never came: the last value the remote sent meanwhile is the truth."""
+        now = self.clock.now()
+        expired = [name for name, (_, until) in self._expect.items() if now > until]
+        changed = []
+        for name in expired:
+            del self._expect[name]
+            if name in self._held:
+                self.bound[name].value = self._held.pop(name)
+                changed.append(self.bound[name])
+        if changed:
+            self.received(changed)
 
     def health(self) -> Quality:
         """The quality the link's state allows: GOOD, UNCERTAIN after 2x the period without data, BAD after 5x or down."""
@@ -217,6 +240,8 @@ class Link(ABC):
         shown = Quality.GOOD
         while True:
             await self.clock.sleep(tick)
+            if self._expect:
+                self._expire()
             health = self.health()
             if self.connected:
                 self._set_state(LinkState.UP if health is Quality.GOOD else LinkState.LATE)
@@ -260,6 +285,7 @@ class Link(ABC):
                     clients.append((name, batch.pop(name), noted[1]))
             items = [(self.bound[name], value) for name, value in batch.items()]
             if items:
+                self._expecting(items)
                 try:
                     answers = await self.write(items)
                 except LinkError as error:
@@ -283,6 +309,7 @@ class Link(ABC):
         """Send one value now; the remote's refusal, or None. Raises LinkError when the link is down."""
         if not self.connected:
             raise LinkError(f"link {self.name} is {self.state.value}: {self.error or 'not connected'}")
+        self._expecting([(bound, value)])
         try:
             answers = await self.write([(bound, value)])
         except LinkError:
@@ -293,15 +320,16 @@ class Link(ABC):
 
     def took(self, items: Sequence[tuple[BoundTag, Any]], answers: Sequence[str | None]) -> None:
         """Note the remote's answers to writes: the value it holds now, or why it refused."""
-        until = self.clock.now() + UNCERTAIN_AFTER * self.settings.period + self.settings.timeout
         for (bound, value), refusal in zip(items, answers):
             if refusal is None:
                 self.writes["ok"] += 1
                 bound.refused = ""
-                bound.value = value
-                if bound.binding.direction.reads:
-                    self._expect[bound.name] = (value, until)
+                if not bound.binding.direction.reads:
+                    bound.value = value  # what the remote holds now (a `both` tag learns it from the echo)
                 continue
+            self._expect.pop(bound.name, None)
+            if bound.name in self._held:
+                bound.value = self._held.pop(bound.name)
             self.writes["refused"] += 1
             bound.refused = f"the remote refused {value!r}: {refusal}"
             self.error = f"{bound.name} = {value!r} refused by the remote: {refusal}"

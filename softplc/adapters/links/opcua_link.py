@@ -241,15 +241,18 @@ class OpcuaLink(Link):
             bound.bad(f"the remote says {status_text(status)}", Quality.UNCERTAIN)
 
     async def _heartbeat(self) -> None:
-        """Read the server's clock when a period went by without a publish response."""
+        """Every half period: a publish response since the last look is data; a period without any, a read of the server's clock."""
         assert self.client is not None and self.subscription is not None
         node = self.client.get_node(SERVER_TIME)
         seen = self.subscription.last_publish_at
+        period = self.settings.period
         while True:
-            await self.clock.sleep(self.settings.period)
+            await self.clock.sleep(period / 2)
             if self.subscription.last_publish_at != seen:
                 seen = self.subscription.last_publish_at
                 self.answered()
+                continue
+            if self.last_data is not None and self.clock.now() - self.last_data < period:
                 continue
             started = self.clock.now()
             await self._call(node.read_value(), "heartbeat (reading the server's time)")

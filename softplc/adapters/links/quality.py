@@ -101,7 +101,7 @@ class TagPublisher:
         if reason == bound.logged:
             return
         if reason:
-            log.warning("link %s: %s is BAD: %s", self.link, bound.name, reason)
+            log.warning("link %s: %s is %s: %s", self.link, bound.name, bound.quality.value.upper(), reason)
         elif bound.logged:
             log.info("link %s: %s is good again", self.link, bound.name)
         bound.logged = reason
