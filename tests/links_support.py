@@ -201,3 +201,75 @@ class AsyncuaRemote:
 
     async def stop(self) -> None:
         await self.server.stop()
+
+
+class SoftplcRemote:
+    """A second softplc: `softplc run FILE` in its own process, serving OPC UA and Modbus on free loopback ports.
+
+    `yaml` is its plant (tags, tasks); the servers are added here. An operator `link` (password
+    `PASSWORD`) may write over OPC UA. `stop(signal)` kills or freezes it; `start()` runs it again
+    on the same ports and state.
+    """
+
+    PASSWORD = "link-password"
+
+    def __init__(self, directory: Path, yaml: str) -> None:
+        self.directory = directory
+        self.opcua_port = free_port()
+        self.modbus_port = free_port()
+        self.endpoint = f"opc.tcp://127.0.0.1:{self.opcua_port}/softplc/"
+        self.path = directory / "remote.yaml"
+        self.path.write_text(textwrap.dedent(yaml) + textwrap.dedent(f"""
+            servers:
+              opcua: {{endpoint: "{self.endpoint}"}}
+              modbus: {{host: 127.0.0.1, port: {self.modbus_port}}}
+              hmi: {{enabled: false}}
+            """))
+        self.state = directory / "remote-state"
+        from softplc.security.users import UserStore
+        from softplc.core.roles import Role
+
+        UserStore(self.state / "users.yaml").add("link", Role.OPERATOR, self.PASSWORD)
+        (directory / "link.password").write_text(self.PASSWORD + "\n")
+        self.process: asyncio.subprocess.Process | None = None
+        self.output: list[str] = []
+
+    async def start(self, timeout: float = 60.0) -> None:
+        """Run it and wait until both servers serve."""
+        import os
+        import sys
+
+        env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+        self.process = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "softplc", "run", str(self.path), "--state-dir", str(self.state), "--no-status",
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT, env=env,
+        )
+        assert self.process.stdout is not None
+        serving = 0
+        deadline = time.monotonic() + timeout
+        while serving < 2:
+            line = await asyncio.wait_for(self.process.stdout.readline(), max(0.1, deadline - time.monotonic()))
+            if not line:
+                raise AssertionError("the remote softplc ended:\n" + "".join(self.output[-30:]))
+            text = line.decode(errors="replace")
+            self.output.append(text)
+            serving += text.startswith("serving:")
+        self._drain = asyncio.ensure_future(self._read_rest())
+
+    async def _read_rest(self) -> None:
+        assert self.process is not None and self.process.stdout is not None
+        while line := await self.process.stdout.readline():
+            self.output.append(line.decode(errors="replace"))
+
+    def signal(self, number: int) -> None:
+        assert self.process is not None
+        self.process.send_signal(number)
+
+    async def kill(self) -> None:
+        import signal
+
+        if self.process is not None and self.process.returncode is None:
+            self.process.send_signal(signal.SIGCONT)
+            self.process.kill()
+            await self.process.wait()
+            await asyncio.gather(self._drain, return_exceptions=True)
