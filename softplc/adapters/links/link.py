@@ -36,6 +36,8 @@ WRITE_COMMAND = "links.write"  # a client's write of a bound tag goes out as thi
 FIRST_BACKOFF = 0.5
 UNCERTAIN_AFTER = 2  # periods without data
 BAD_AFTER = 5
+MIN_QUALITY_PERIOD = 0.01
+LATE_LOG_INTERVAL = 60.0  # s: a link that keeps going late is logged once a minute, not at each episode
 
 
 class LinkError(Exception):
@@ -81,6 +83,7 @@ class Link(ABC):
         self._wake = asyncio.Event()
         self._sys: dict[str, Any] = {}
         self._down_logged = False
+        self._late_logged: float | None = None
 
     # -- what a protocol implements -------------------------------------------------------
 
@@ -224,11 +227,16 @@ class Link(ABC):
         if not self.connected or self.last_data is None:
             return Quality.BAD
         age = self.clock.now() - self.last_data
-        if age > BAD_AFTER * self.settings.period:
+        if age > BAD_AFTER * self.quality_period:
             return Quality.BAD
-        if age > UNCERTAIN_AFTER * self.settings.period:
+        if age > UNCERTAIN_AFTER * self.quality_period:
             return Quality.UNCERTAIN
         return Quality.GOOD
+
+    @property
+    def quality_period(self) -> float:
+        """The period the quality rule counts in: the link's, but at least 10 ms (a poll every 1 ms is not judged by 2 ms of silence)."""
+        return max(self.settings.period, MIN_QUALITY_PERIOD)
 
     def _publish_all(self) -> None:
         self.publisher.publish(self.readers, self.health())
@@ -236,7 +244,7 @@ class Link(ABC):
 
     async def _watch(self) -> None:
         """Every half period (at least every 10 ms): age the data, and say so in the tags' quality."""
-        tick = max(self.settings.period / 2, 0.01)
+        tick = self.quality_period / 2
         shown = Quality.GOOD
         while True:
             await self.clock.sleep(tick)
@@ -248,9 +256,13 @@ class Link(ABC):
             if health is not shown:
                 shown = health
                 if self.connected and health is not Quality.GOOD:
-                    age = self.clock.now() - (self.last_data or 0.0)
-                    self.error = f"no data for {age * 1000:.0f} ms ({age / self.settings.period:.1f}x the period)"
-                    log.warning("link %s: %s: bound tags %s", self.name, self.error, health.value.upper())
+                    now = self.clock.now()
+                    age = now - (self.last_data or 0.0)
+                    self.error = f"no data for {age * 1000:.0f} ms ({age / self.quality_period:.1f}x the period)"
+                    quiet = self._late_logged is None or now - self._late_logged >= LATE_LOG_INTERVAL
+                    log.log(logging.WARNING if quiet else logging.DEBUG, "link %s: %s: bound tags %s", self.name, self.error, health.value.upper())
+                    if quiet:
+                        self._late_logged = now
                 self._publish_all()
 
     def _set_state(self, state: LinkState) -> None:

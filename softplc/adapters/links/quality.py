@@ -77,8 +77,13 @@ class TagPublisher:
                     qualities.setdefault(Quality.BAD, []).append(bound)
                 continue
             quality = worse(bound.quality, health)
-            if bound.shown != (bound.value, quality):
-                values.setdefault(quality, []).append(bound)
+            shown = bound.shown
+            if shown is None or shown[0] != bound.value or type(shown[0]) is not type(bound.value):
+                values.setdefault(quality, []).append(bound)  # a new value from the remote
+            elif shown[1] is not quality:
+                # Only the verdict changed (the link went late, or is back): the tag keeps its value —
+                # a `both` tag may have been changed here since, and a stale remote value must not undo that.
+                qualities.setdefault(quality, []).append(bound)
         for quality, group in values.items():
             results = self.db.submit([(bound.name, bound.value) for bound in group], self.origin, quality=quality)
             for bound, rejected in zip(group, results):

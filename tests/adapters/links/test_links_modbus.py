@@ -151,9 +151,10 @@ async def test_a_silent_remote_makes_tags_uncertain_at_2x_then_bad_at_5x_the_per
         assert db.value("_sys.links.press.state") == "late"
         await wait_until(lambda: db["count"].quality is Quality.BAD, timeout=2, what="BAD")
         bad_at = runtime.clock.now() - silent_from
-        # The watchdog looks every half period, and the journal is applied at the next 10 ms scan.
-        assert 0.2 <= uncertain_at < 0.2 + 0.1, uncertain_at
-        assert 0.5 <= bad_at < 0.5 + 0.1, bad_at
+        # The watchdog looks every half period, the journal is applied at the next 10 ms scan, and the
+        # machine is shared: the bounds below tell 2x from 5x the period, with room for a loaded loop.
+        assert 0.2 <= uncertain_at < 0.2 + 0.2, uncertain_at
+        assert 0.5 <= bad_at < 0.5 + 0.2, bad_at
         assert db.value("count") == 0 and db.value("_sys.links.press.connected") is True  # still connected: only late
         remote.hold.set()
         await wait_until(lambda: db["count"].quality is Quality.GOOD, timeout=3, what="GOOD again")
