@@ -252,3 +252,22 @@ async def test_a_register_the_remote_does_not_serve_stops_the_start_with_its_loc
     message = str(raised.value)
     assert "tagdb.yaml:7:50: " in message and "link press: exception 02 (illegal data address) reading holding 5000..5000" in message
     assert "holding:10" not in message and message.count("exception") == 1
+
+
+async def test_a_late_link_changes_a_both_tags_quality_never_its_local_value(tmp_path: Path, remote: PymodbusRemote) -> None:
+    # A program cleared a both tag (the handshake's Ready); the remote has not taken it yet when the
+    # link goes late: the tag must say UNCERTAIN with the program's value, not the remote's stale one.
+    remote.holding[22] = 5
+    runtime = await linked(tmp_path, remote, period="100ms")
+    db = runtime.db
+    try:
+        await wait_until(lambda: db.value("mode") == 5 and db["mode"].quality is Quality.GOOD)
+        remote.hold.clear()  # from now on nothing is answered: neither the polls nor our write
+        db.submit([("mode", 6)], "program")
+        await wait_until(lambda: db["mode"].quality is Quality.UNCERTAIN, timeout=2, what="UNCERTAIN")
+        assert db.value("mode") == 6
+        await wait_until(lambda: db["mode"].quality is Quality.BAD, timeout=2, what="BAD")
+        assert db.value("mode") == 6
+    finally:
+        remote.hold.set()
+        await runtime.stop()
