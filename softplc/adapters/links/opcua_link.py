@@ -54,12 +54,14 @@ class OpcuaLink(Link):
         self._lost: asyncio.Future[str] | None = None
         self._incoming: list[DataChangeEvent] = []
         self.notifications = 0
-        self.subscribed_at: float | None = None  # clock time the monitored items were created (the benchmark's figure)
+        self.session_at: float | None = None  # clock time the remote answered (its session open): bench/links_opcua_subscribe.py
+        self.subscribed_at: float | None = None  # clock time the monitored items were created
 
     # -- connection ---------------------------------------------------------------------
 
     async def connect(self) -> None:
         settings = self.settings
+        self.problems = {}
         loop = asyncio.get_running_loop()
         self._lost = loop.create_future()
         try:
@@ -72,9 +74,11 @@ class OpcuaLink(Link):
             raise LinkError(f"cannot prepare the connection: {error}") from None
         self.client.connection_lost_callback = self._connection_lost
         await self._call(self.client.connect(), "connecting")
+        self.session_at = self.clock.now()
         await self._resolve()
-        await self._check_nodes()
-        await self._subscribe()
+        # Both at once: the subscription need not wait for the types (a value carries its own);
+        # a node the check finds wrong is never taken from (`_take`).
+        await asyncio.gather(self._check_nodes(), self._subscribe())
 
     async def close(self) -> None:
         client, self.client, self.subscription = self.client, None, None
@@ -134,7 +138,6 @@ class OpcuaLink(Link):
         writers = [name for name in names if self.bound[name].binding.direction.writes]
         access = await self._call(self.client.uaclient.read_attributes([self.node_ids[n] for n in writers], ua.AttributeIds.UserAccessLevel),
                                   "reading the bound nodes' access levels") if writers else []
-        self.problems = {}
         for name, answer in zip(names, types):
             binding = self.bound[name].binding
             if not answer.StatusCode.is_good():
@@ -160,7 +163,7 @@ class OpcuaLink(Link):
 
     async def _subscribe(self) -> None:
         assert self.client is not None
-        readers = [bound for bound in self.readers if bound.name not in self.problems]
+        readers = self.readers
         publishing = self.settings.period if self.settings.publishing_interval is None else self.settings.publishing_interval
         params = ua.CreateSubscriptionParameters(
             RequestedPublishingInterval=publishing * 1000.0, RequestedLifetimeCount=10000,
@@ -177,8 +180,8 @@ class OpcuaLink(Link):
         self.subscribed_at = self.clock.now()
         for bound, handle in zip(readers, handles):
             if isinstance(handle, ua.StatusCode):
-                reason = f"node {bound.binding.source}: the remote refused to monitor it: {status_text(handle)}"
-                self.problems[bound.name] = reason
+                # The type check's reason (a missing node) says more, whichever answer comes first.
+                reason = self.problems.setdefault(bound.name, f"node {bound.binding.source}: the remote refused to monitor it: {status_text(handle)}")
                 bound.bad(reason)
 
     # -- reading ------------------------------------------------------------------------
@@ -216,7 +219,7 @@ class OpcuaLink(Link):
         changed: list[BoundTag] = []
         for event in events:
             name = by_node.get(event.node.nodeid)
-            if name is None:
+            if name is None or name in self.problems:
                 continue
             bound = self.bound[name]
             data_value = event.data.monitored_item.Value
