@@ -250,6 +250,7 @@ class Link(ABC):
             await self.clock.sleep(tick)
             if self._expect:
                 self._expire()
+            self._update_sys()  # the round trip, at the watchdog's pace rather than at every poll
             health = self.health()
             if self.connected:
                 self._set_state(LinkState.UP if health is Quality.GOOD else LinkState.LATE)

@@ -188,6 +188,9 @@ class ModbusLink(Link):
         lost = asyncio.ensure_future(self._lost.wait())
         try:
             await asyncio.wait({task, lost}, return_when=asyncio.FIRST_COMPLETED)
+        except asyncio.CancelledError:  # the plant stops: the request goes with it
+            task.cancel()
+            raise
         finally:
             lost.cancel()
         if not task.done():

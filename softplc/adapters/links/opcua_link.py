@@ -245,14 +245,15 @@ class OpcuaLink(Link):
 
     async def _heartbeat(self) -> None:
         """Every half period: a publish response since the last look is data; a period without any, a read of the server's clock."""
-        assert self.client is not None and self.subscription is not None
+        subscription = self.subscription  # this connection's: close() forgets it
+        assert self.client is not None and subscription is not None
         node = self.client.get_node(SERVER_TIME)
-        seen = self.subscription.last_publish_at
+        seen = subscription.last_publish_at
         period = self.settings.period
         while True:
             await self.clock.sleep(period / 2)
-            if self.subscription.last_publish_at != seen:
-                seen = self.subscription.last_publish_at
+            if subscription.last_publish_at != seen:
+                seen = subscription.last_publish_at
                 self.answered()
                 continue
             if self.last_data is not None and self.clock.now() - self.last_data < period:
