@@ -56,6 +56,9 @@ class WriteRejected(Exception):
         self.detail = detail
 
 
+KEEP_VALUE: Any = object()  # a journaled quality change: the tag keeps the value it has when applied
+
+
 @dataclass(frozen=True, slots=True)
 class Write:
     """One journaled write: a new value (and optionally a quality) for a tag."""
@@ -244,11 +247,16 @@ class TagDatabase:
         return WriteRejected(name, rule, detail)
 
     def submit_quality(self, names: Iterable[str], quality: Quality, origin: Origin | str) -> None:
-        """Journal a quality change (the value stays) for the named tags (drivers only)."""
+        """Journal a quality change (the value stays) for the named tags (drivers only).
+
+        The value is the one the tag has when the change is applied: a value journaled before it
+        (a driver's new reading in the same cycle) stands.
+        """
         origin = origin_of(origin)
         for name in names:
-            tag = self._tags[name]
-            self._journal.append(Write(name, tag.value, origin, quality))
+            if name not in self._tags:
+                raise KeyError(name)
+            self._journal.append(Write(name, KEEP_VALUE, origin, quality))
 
     def force(self, name: str, value: Any, origin: Origin | str) -> Any:
         """Force a tag to `value` from the next cycle boundary on; returns the coerced value.
@@ -297,9 +305,10 @@ class TagDatabase:
             if write.tag in forces:
                 continue
             tag = self._tags[write.tag]
+            value = tag.value if write.value is KEEP_VALUE else write.value
             # A journaled value was valid when submitted; the tag cannot change type since.
-            if tag.value != write.value or tag.quality is not write.quality or type(tag.value) is not type(write.value):
-                tag.value = write.value
+            if tag.value != value or tag.quality is not write.quality or type(tag.value) is not type(value):
+                tag.value = value
                 tag.quality = write.quality
                 tag.timestamp = now
                 changed[write.tag] = tag

@@ -61,7 +61,9 @@ def add_commands(commands: argparse._SubParsersAction) -> None:  # type: ignore[
     parser.add_argument("--scan", type=number(float, low=MIN_SCAN_MS, unit=" ms (the runtime's shortest task interval is 100us)"),
                         default=10.0, metavar="MS",
                         help="the PLC's scan in ms (default 10, the thesis's; at least 0.1); with --endpoint: what the remote PLC runs")
-    parser.add_argument("--client", choices=("subscription", "poll"), help="OPC UA client mode (default subscription; Modbus always polls)")
+    parser.add_argument("--client", choices=("subscription", "poll", "link"),
+                        help="OPC UA client mode (default subscription; Modbus always polls); link: a second softplc runtime "
+                        "answers, joined to ours by a link of --protocol (PLC to PLC, programs/handshake_answer.yaml)")
     parser.add_argument("--poll-interval", type=number(float, low=0, inclusive=False, unit=" ms"), default=1.0, metavar="MS",
                         help="client polling period (default 1 ms)")
     parser.add_argument("--publishing-interval", type=number(float, low=0, unit=" ms"), default=0.0, metavar="MS",
@@ -109,6 +111,8 @@ def targets(args: argparse.Namespace) -> list[Target]:
     elif args.tag:
         raise ValueError("--tag is for --endpoint: our own handshake plant has its tags where the client expects them")
     _check_tags(args.tag, protocols)
+    if args.client == "link" and args.endpoint is not None:
+        raise ValueError("--client link runs both runtimes here: leave out --endpoint")
     if args.protocol == "modbus" and args.client == "subscription":
         raise ValueError("Modbus has no subscriptions: leave out --client or use --client poll")
     if args.security and "opcua" not in protocols:
@@ -131,7 +135,7 @@ def targets(args: argparse.Namespace) -> list[Target]:
         for protocol in protocols:
             result.append(Target(
                 protocol=protocol, scenario=scenario, scan=args.scan / 1000.0,
-                client_mode=None if protocol == "modbus" else args.client,
+                client_mode=args.client if protocol == "opcua" or args.client == "link" else None,
                 endpoint=args.endpoint, samples=samples, duration=args.duration, tags=list(args.tag),
                 namespace=args.namespace, security=security, user=args.user, password=password,
                 unit_id=args.unit_id, word_order=args.word_order, poll_interval_ms=args.poll_interval,

@@ -86,7 +86,13 @@ async def _measure(target: Target, result: Measurement, progress: Progress, stop
             else:
                 result.endpoint = server.endpoint
             result.same_clock = True
-            if not interrupted(result, stop, " before the client started"):
+            if interrupted(result, stop, " before the client started"):
+                pass
+            elif target.mode == "link":
+                from softplc.latency.link_peer import run_link_peer
+
+                await run_link_peer(target, result, progress, stop, runtime, state)
+            else:
                 await run_client(target, result, progress, stop)
         finally:
             task = runtime.tasks[0]

@@ -14,7 +14,7 @@ class Target:
     protocol: str  # opcua | modbus
     scenario: str  # slow | average | fast
     scan: float = 0.01  # the PLC's scan in s (ours; for --endpoint, what the remote PLC runs)
-    client_mode: str | None = None  # subscription | poll; None: subscription for OPC UA, poll for Modbus
+    client_mode: str | None = None  # subscription | poll | link; None: subscription for OPC UA, poll for Modbus
     endpoint: str | None = None  # None: start our runtime
     samples: int | None = None
     duration: float | None = None

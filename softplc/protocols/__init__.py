@@ -1,1 +1,1 @@
-"""Wire-protocol pieces shared by servers, links and clients: OPC UA variants and client connections."""
+"""Wire-protocol pieces shared by servers, links and clients: OPC UA variants and client connections, the Modbus register codec, MQTT."""

@@ -80,6 +80,17 @@ def _existing_or_new(directory: Path, name: str, uri: str, days: int) -> ClientC
     return ClientCertificate(certificate_path, key_path, uri)
 
 
+def client_certificate(certificate: Path, private_key: Path) -> ClientCertificate:
+    """A certificate and key given by a user, with the ApplicationUri its certificate names (ValueError if unreadable)."""
+    loaded = load_certificate_file(certificate)
+    try:
+        names = loaded.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+        uris = names.get_values_for_type(x509.UniformResourceIdentifier)
+    except x509.ExtensionNotFound:
+        uris = []
+    return ClientCertificate(certificate, private_key, uris[0] if uris else f"urn:softplc:client:{certificate.stem}")
+
+
 def pem_certificate(certificate: ClientCertificate) -> bytes:
     """The certificate as PEM (some clients, e.g. node-opcua, want PEM files)."""
     return load_certificate_file(certificate.certificate).public_bytes(serialization.Encoding.PEM)
@@ -94,15 +105,17 @@ async def make_client(
     security: str = "None",
     login_with_certificate: bool = False,
     timeout: float = 4.0,
+    watchdog_interval: float = 1.0,
 ) -> Client:
     """An asyncua Client for a softplc server (not yet connected: use `async with client:`).
 
     `security` is a softplc policy name: None, Basic256Sha256_Sign or
     Basic256Sha256_SignAndEncrypt (which need `certificate`). With `login_with_certificate`
     the session logs in with the certificate (an X509 identity token) instead of a user name;
-    with neither, it is anonymous.
+    with neither, it is anonymous. Every `watchdog_interval` seconds the client reads the
+    server's state to notice a server that stopped answering (`client.connection_lost_callback`).
     """
-    client = Client(endpoint, timeout=timeout)
+    client = Client(endpoint, timeout=timeout, watchdog_intervall=watchdog_interval)
     if user is not None:
         client.set_user(user)
         client.set_password(password or "")

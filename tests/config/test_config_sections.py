@@ -85,9 +85,9 @@ def test_every_owner_module_is_light_to_import() -> None:
 def test_the_existing_owners_are_registered_with_their_sections_and_keys() -> None:
     paths = [section.path for section in sections.registered()]
     # the runtime's, then each adapter's in start order (softplc/config/manifest.py)
-    assert paths == [("runtime",), ("audit",), ("alarms",), ("mqtt",), ("fleet",), ("history",), ("servers", "opcua"), ("servers", "modbus"),
-                     ("sparkplug",), ("servers", "hmi"), ("hmi",)]
-    assert set(sections.tag_keys()) == {"modbus", "history"}
+    assert paths == [("runtime",), ("audit",), ("alarms",), ("mqtt",), ("fleet",), ("history",), ("links",), ("servers", "opcua"),
+                     ("servers", "modbus"), ("sparkplug",), ("servers", "hmi"), ("hmi",)]
+    assert set(sections.tag_keys()) == {"modbus", "history", "link"}
     properties = sections.config_schema()["properties"]
     assert set(properties["servers"]["properties"]) == {"opcua", "modbus", "hmi"}
     assert "modbus" in properties["tags"]["additionalProperties"]["properties"]

@@ -126,6 +126,20 @@ def test_commit_notifies_only_changes_and_restores_good_quality() -> None:
     assert [t.name for t in changed] == ["count"] and db["count"].quality is Quality.GOOD
 
 
+def test_a_quality_change_keeps_the_value_the_tag_has_when_it_is_applied() -> None:
+    # A driver journals a new value, then (before the next boundary) a quality change: the value
+    # stays the new one. The quality write must not carry the value of the moment it was submitted.
+    db = make_db()
+    db.submit([("count", 7)], "driver")
+    db.submit_quality(["count"], Quality.UNCERTAIN, "driver")
+    db.apply_journal()
+    assert (db.value("count"), db["count"].quality) == (7, Quality.UNCERTAIN)
+    db.commit({"count": 8})  # a program's output, applied at once, then a quality change
+    db.submit_quality(["count"], Quality.BAD, "driver")
+    db.apply_journal()
+    assert (db.value("count"), db["count"].quality) == (8, Quality.BAD)
+
+
 def test_a_failing_subscriber_does_not_stop_the_others(caplog) -> None:
     db = make_db()
     seen: list[str] = []

@@ -7,6 +7,7 @@ import { get, tagMeta } from '../api.js';
 import { formatNumber } from '../format.js';
 import { decoratePrograms } from '../ops/programs.js';
 import { mountSparkplug } from './sparkplug_panel.js';
+import { linksPanel } from './links_panel.js';
 
 const SERIES = [['scan', 'scan time'], ['cycle', 'cycle time'], ['latency', 'start latency']];
 const STATS = ['min', 'mean', 'p99', 'max'];
@@ -61,6 +62,11 @@ export async function mount(root, ctx) {
       el('h3', { text: `Programs (${task.programs.length})` }), ...programs);
   });
   root.append(runtime, el('div', { class: 'grid-cards wide live-content' }, ...cards));
+  const links = await linksPanel();  // the links to other controllers and their health, when the plant has any
+  if (links) {
+    root.append(links.node);
+    for (const tag of links.cells.keys()) cells.set(tag, { node: null, kind: 'link', update: links.cells.get(tag) });
+  }
 
   const update = (names) => {
     for (const name of names) {
@@ -69,6 +75,9 @@ export async function mount(root, ctx) {
       if (!cell || !item) continue;
       const value = item.v;
       switch (cell.kind) {
+        case 'link':
+          cell.update(value);
+          break;
         case 'state':
           cell.node.className = `chip live-value ${value === 'RUNNING' ? 'ok' : value === 'ERROR' ? 'bad' : 'warn'}`;
           setText(cell.node, value);

@@ -28,7 +28,7 @@ from typing import Any
 
 from softplc.config.plant import SYSTEM_PREFIX, PlantConfig
 from softplc.core.datatypes import DataType
-from softplc.adapters.modbus.codec import REGISTER_TYPES, RegisterCodec, register_words
+from softplc.protocols.modbus_codec import REGISTER_TYPES, RegisterCodec, register_words
 from softplc.adapters.modbus.settings import ModbusSettings
 from softplc.config.system_tags import runtime_tag_definitions
 from softplc.core.tags import Access, TagDef

@@ -29,7 +29,7 @@ from pymodbus.simulator import SimData, SimDevice
 
 from softplc.config import PlantConfig
 from softplc.adapters.modbus.address_map import AddressMap, Table, build_address_map
-from softplc.adapters.modbus.codec import CodecError
+from softplc.protocols.modbus_codec import CodecError
 from softplc.adapters.modbus import lognoise
 from softplc.adapters.modbus.connections import ConnectionCounts, PlcTcpServer, request_peer
 from softplc.adapters.modbus.functions import RequestDecoder

@@ -13,7 +13,7 @@ import pytest
 from softplc.app.cli import main
 from softplc.core.datatypes import DataType
 from softplc.adapters.modbus.address_map import Table, build_address_map
-from softplc.adapters.modbus.codec import CodecError, RegisterCodec
+from softplc.protocols.modbus_codec import CodecError, RegisterCodec
 from softplc.config.yamlsource import ConfigError
 
 BASE = """

@@ -1,4 +1,4 @@
-"""How one tag value becomes Modbus words (16-bit registers) and back.
+"""How one tag value becomes Modbus words (16-bit registers) and back: for the Modbus server and links.
 
 Bytes inside a register are always big-endian (the Modbus rule); the order of the registers
 of a 32/64-bit value is configurable: "big" puts the most significant word first (ABCD, the
@@ -34,7 +34,7 @@ WORD_ORDERS = ("big", "little")
 
 
 class CodecError(ValueError):
-    """Registers written by a client do not hold a value of the tag's encoding."""
+    """Registers (written by a client, or read from a remote server) do not hold a value of the tag's encoding."""
 
 
 def register_words(register_type: DataType) -> int:
@@ -75,7 +75,7 @@ class RegisterCodec:
         return words
 
     def decode(self, words: list[int]) -> Any:
-        """The value that registers written by a client stand for; raises CodecError."""
+        """The value that registers (a client's write, a remote's answer) stand for; raises CodecError."""
         if len(words) != self.words:
             raise CodecError(f"expected {self.words} registers, got {len(words)}")
         if self.register_type is None:
