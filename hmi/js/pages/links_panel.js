@@ -6,6 +6,7 @@
 
 import { el, setText } from '../dom.js';
 import { command } from '../commands.js';
+import { tagsWithPrefix } from '../api.js';
 import { formatNumber } from '../format.js';
 
 const STATES = { up: 'ok', late: 'warn', connecting: 'idle', down: 'bad' };
@@ -13,6 +14,7 @@ const QUALITIES = { good: 'ok', uncertain: 'warn', bad: 'bad' };
 
 /** The panel (or null without links) and the live tags it shows: {node, cells: Map tag → update(value)}. */
 export async function linksPanel() {
+  if (!(await tagsWithPrefix('_sys.links.')).length) return null;  // no links: no query (it is unknown, a 404)
   const answer = await command('links.list');
   if (!answer.ok || !Array.isArray(answer.result) || !answer.result.length) return null;
   const cells = new Map();
