@@ -52,6 +52,10 @@ EXCEPTION_FOR_RULE: dict[Rule, ExcCodes] = {
     Rule.OUT_OF_RANGE: ExcCodes.ILLEGAL_VALUE,
     Rule.ACCESS_DENIED: ExcCodes.ILLEGAL_ADDRESS,
     Rule.INVALID_REQUEST: ExcCodes.ILLEGAL_ADDRESS,
+    Rule.FORCED: ExcCodes.ILLEGAL_ADDRESS,  # not writable while an engineer forces it, like a read-only tag
+    # The standby of a redundant pair: "busy, retry later" — the client should write to the
+    # active (docs/redundancy.md); Modbus has no way to name it.
+    Rule.NOT_ACTIVE: ExcCodes.DEVICE_BUSY,
 }
 # The read that pymodbus does after FC5/FC6 builds the echo of the request: leave the
 # just-written words in place instead of refreshing them from the (not yet applied) tag.

@@ -72,6 +72,10 @@ _RULE_CODES = {
     Rule.OUT_OF_RANGE: ua.StatusCodes.BadOutOfRange,
     Rule.ACCESS_DENIED: ua.StatusCodes.BadUserAccessDenied,
     Rule.FORCED: ua.StatusCodes.BadLocked,  # "locked by a different application": an engineer's force
+    Rule.INVALID_REQUEST: ua.StatusCodes.BadInvalidArgument,
+    # The standby of a redundant pair; ServerRedundancy (ServiceLevel, ServerUriArray) and
+    # _sys.redundancy.active tell the client where the active is (docs/redundancy.md).
+    Rule.NOT_ACTIVE: ua.StatusCodes.BadInvalidState,
 }
 _CODE_RULES = {
     ua.StatusCodes.BadTypeMismatch: Rule.TYPE_MISMATCH,

@@ -28,6 +28,7 @@ _CODE_RULES = {
     ua.StatusCodes.BadOutOfRange: Rule.OUT_OF_RANGE,
     ua.StatusCodes.BadUserAccessDenied: Rule.ACCESS_DENIED,
     ua.StatusCodes.BadLocked: Rule.FORCED,
+    ua.StatusCodes.BadInvalidState: Rule.NOT_ACTIVE,
 }
 # Which role makes the runtime's validation give the rule's message (the rule itself is the server's).
 _ROLE_FOR_RULE = {Rule.READ_ONLY: Role.OPERATOR, Rule.ACCESS_DENIED: Role.VIEWER, Rule.FORCED: Role.ENGINEER}

@@ -52,6 +52,7 @@ class _Runtime(Protocol):
 
     config: PlantConfig
     clock: Clock
+    program_clock: Clock  # what programs read (the runtime's clock, aligned with an active's in a standby)
     commands: Commands
     engine: ScanEngine
     tasks: Sequence[Task]
@@ -177,7 +178,7 @@ class OnlineChange:
         where = f"{program.location}: " if program.location is not None else ""
         try:
             with warm_start():
-                created = program.cls(ProgramContext(program.name, self.runtime.clock, dict(program.params)))
+                created = program.cls(ProgramContext(program.name, self.runtime.program_clock, dict(program.params)))
                 created.restarted = True
                 created.first_scan = True
                 created.setup()
