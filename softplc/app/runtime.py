@@ -86,6 +86,7 @@ class Runtime:
         self.engine.after_cycle(self._after_cycle)
         self.system_tags = SystemTags(self.db, self.engine, self._state_for_tags, self.reset_faults)
         self.commands = Commands(self.clock.wall)
+        self.commands.refusal = self.role.refusal  # a standby carries out no action (queries only)
         self.events = EventBus()
         register_runtime_commands(self)
         register_program_commands(self)

@@ -68,3 +68,25 @@ async def test_a_lapsed_term_stops_the_scan_and_the_writes_at_once_and_a_new_ter
         assert task.stats.overruns == 0  # the releases that passed are no overruns
     finally:
         await runtime.stop()
+
+
+async def test_a_standby_refuses_actions_naming_the_active_but_answers_queries() -> None:
+    from softplc.core.commands import CommandRefused, Commands, Permission
+
+    holder = RoleHolder(lambda: 0.0)
+    commands = Commands(lambda: 0.0)
+    commands.refusal = holder.refusal
+    calls: list[Any] = []
+    commands.on_call(calls.append)
+    commands.register("plant.act", lambda arguments, origin: "done", permission=Permission.ACKNOWLEDGE)
+    commands.register("plant.look", lambda arguments, origin: "seen", permission=Permission.VIEW)
+    commands.register("pair.switch", lambda arguments, origin: "switched", permission=Permission.ENGINEER, on_standby=True)
+    holder.set(RoleTerm(PlantRole.STANDBY, 2, active="a", detail="this runtime (b) is the standby: act on the active, a"))
+    try:
+        await commands.call("plant.act", {}, OPERATOR)
+        raise AssertionError("a standby carried out an action")
+    except CommandRefused as refused:
+        assert "act on the active, a" in str(refused)
+    assert calls[-1].accepted is False
+    assert await commands.call("plant.look", {}, OPERATOR) == "seen"
+    assert await commands.call("pair.switch", {}, Origin("cli", "erin", role=Role.ENGINEER)) == "switched"
