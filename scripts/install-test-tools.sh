@@ -14,6 +14,8 @@ command -v chromium >/dev/null 2>&1 || apt_packages+=(chromium)
 [ -x /usr/bin/prometheus ] || apt_packages+=(prometheus)
 # The MQTT users (VDA 5050, Sparkplug B) are tested against a real broker (tests/mosquitto_server.py).
 [ -x /usr/sbin/mosquitto ] || apt_packages+=(mosquitto)
+# A redundant pair is coordinated by etcd (tests/etcd_server.py starts Debian's etcd-server on loopback ports).
+command -v etcd >/dev/null 2>&1 || apt_packages+=(etcd-server)
 if [ ${#apt_packages[@]} -gt 0 ]; then
   echo "installing system packages: ${apt_packages[*]}" >&2
   scripts/apt-install.sh "${apt_packages[@]}" \

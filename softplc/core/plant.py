@@ -90,8 +90,8 @@ class StateReplication(Protocol):
     @property
     def held(self) -> int: ...  # the active's journal entries a standby holds, not yet applied there
 
-    def capture(self, task: TaskView) -> list[Any]:
-        """What changed since the previous capture, at the end of `task`'s cycle (call from `after_cycle`)."""
+    def capture(self, task: TaskView | None) -> list[Any]:
+        """What changed since the previous capture, at the end of `task`'s cycle (call from `after_cycle`; None: a heartbeat)."""
         ...
 
     def capture_full(self) -> list[Any]:
@@ -104,6 +104,10 @@ class StateReplication(Protocol):
 
     def on_journal(self, callback: Callable[[list[Any]], None]) -> Callable[[], None]:
         """Call `callback(message)` for every batch of writes journaled here, before the writer is answered."""
+        ...
+
+    def pending_journal(self) -> list[Any]:
+        """The writes journaled and not yet applied, as one journal message (send it after a full state)."""
         ...
 
     def hold(self, message: Any) -> None:

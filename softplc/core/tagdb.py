@@ -306,6 +306,10 @@ class TagDatabase:
     def journal_length(self) -> int:
         return len(self._journal)
 
+    def pending(self) -> list[Write | ForceChange]:
+        """The entries waiting for the next cycle boundary, from `applied_position` on (a standby that connects needs them)."""
+        return list(self._journal)
+
     def _add_to_journal(self, entries: list[Write | ForceChange]) -> None:
         if not entries:
             return

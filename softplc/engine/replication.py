@@ -112,8 +112,10 @@ class Replication:
 
     # -- the active -------------------------------------------------------------------------
 
-    def capture(self, task: Task) -> CycleState:
-        """What changed since the previous capture, at the end of `task`'s cycle."""
+    def capture(self, task: Task | None) -> CycleState:
+        """What changed since the previous capture, at the end of `task`'s cycle (None: between cycles, a heartbeat)."""
+        if task is None:
+            return self._capture([], "", full=False)
         return self._capture(task.programs, task.name, full=False)
 
     def capture_full(self) -> CycleState:

@@ -55,7 +55,7 @@ class ReplicationDoor:
     def unpicklable(self) -> dict[str, str]:
         return dict(self.replication.unpicklable)
 
-    def capture(self, task: TaskView) -> list[Any]:
+    def capture(self, task: TaskView | None) -> list[Any]:
         return state_to_wire(self.replication.capture(task))  # type: ignore[arg-type]
 
     def capture_full(self) -> list[Any]:
@@ -67,6 +67,10 @@ class ReplicationDoor:
             self.replication.apply(state)
         except (ReplicationError, ProgramStateError) as error:
             raise StateRefused(str(error)) from None
+
+    def pending_journal(self) -> list[Any]:
+        """The entries journaled and not yet applied, as a journal message (sent after a full state)."""
+        return journal_to_wire(self.db.applied_position, self.db.pending())
 
     def on_journal(self, callback: Callable[[list[Any]], None]) -> Callable[[], None]:
         """Call `callback(journal_message)` for every batch entering the write journal (before the writer is answered)."""
