@@ -114,7 +114,7 @@ class Runtime:
         instances = []
         for program in task.programs:
             try:
-                created = program.cls(ProgramContext(program.name, self.program_clock, dict(program.params)))
+                created = program.cls(ProgramContext(program.name, self.program_clock, dict(program.params), self.role))
             except Exception as error:  # user code: say which program and where, never a traceback
                 where = program.location or Location(str(self.config.path), 1, 1)
                 message = f"program '{program.name}' ({program.reference}) cannot be created: {type(error).__name__}: {error}"

@@ -24,7 +24,7 @@ from typing import Any
 
 from softplc.core.program import Program
 
-SKIPPED = frozenset({"name", "clock", "log"})
+SKIPPED = frozenset({"name", "clock", "log", "plant_role"})
 CLOCK_ID = "softplc.clock"
 
 _SAFE_BUILTINS = frozenset({

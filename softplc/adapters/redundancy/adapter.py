@@ -189,6 +189,8 @@ class RedundancyAdapter:
         self.peer_changed("waiting for the standby")
 
     def peer_changed(self, text: str) -> None:
+        if text != self.peer_text:
+            log.info("redundancy: the peer: %s", text)
         self.peer_text = text
         self.publish()
 

@@ -77,24 +77,38 @@ class Coordinator:
         return ", ".join(f"{host}:{port}" for host, port in self.endpoints)
 
     async def campaign(self, value: dict[str, Any]) -> Holder:
-        """Create the key with a fresh lease unless someone holds it; returns the holder (maybe us)."""
-        if self._lease is None:
-            self._lease = await self._call("lease", self.lease_seconds)
+        """Create the key with a fresh lease unless someone holds it; returns the holder (maybe us).
+
+        Who holds it is asked first (one cheap read a poll); only when nobody does is a lease
+        granted and the key created — in one transaction, so of two members trying at once one wins.
+        """
+        held = await self.look()
+        if held is not None:
+            return held
         from aetcd.client import Transactions
 
+        lease = await self._call("lease", self.lease_seconds)
         transactions = Transactions()
         succeeded, responses = await self._call(
             "transaction",
             compare=[transactions.create(self.key) == 0],
-            success=[transactions.put(self.key, json.dumps(value).encode(), lease=self._lease)],
+            success=[transactions.put(self.key, json.dumps(value).encode(), lease=lease)],
             failure=[transactions.get(self.key)],
         )
         if succeeded:
-            return Holder(True, int(responses[0].response_put.header.revision), value, int(self._lease.id))
+            self._lease = lease
+            return Holder(True, int(responses[0].response_put.header.revision), value, int(lease.id))
+        try:  # the other member was quicker: this lease holds nothing
+            await self._call("revoke_lease", lease.id)
+        except CoordinatorUnreachable:
+            pass
         found = responses[0] if responses else []
         if not found:  # deleted between the compare and the get: try again next time
             return Holder(False, 0, {}, 0)
         data, kv = found[0]
+        return self._holder(data, kv)
+
+    def _holder(self, data: bytes, kv: Any) -> Holder:
         try:
             held = json.loads(data.decode())
         except (ValueError, UnicodeDecodeError):
@@ -105,20 +119,19 @@ class Coordinator:
     async def look(self) -> Holder | None:
         """Who holds the key now (None: nobody), without campaigning."""
         found = await self._call("get", self.key)
-        if found is None:
-            return None
-        try:
-            held = json.loads(found.value.decode())
-        except (ValueError, UnicodeDecodeError):
-            held = {}
-        mine = self._lease is not None and int(found.lease) == int(self._lease.id)
-        return Holder(mine, int(found.create_revision), held if isinstance(held, dict) else {}, int(found.lease))
+        return None if found is None else self._holder(found.value, found)
 
     async def renew(self) -> float:
         """Keep our lease alive; returns the TTL etcd granted (0: the lease is gone, so is the key)."""
         if self._lease is None:
             return 0.0
-        reply = await self._call("refresh_lease", self._lease.id)
+        try:
+            reply = await self._call("refresh_lease", self._lease.id)
+        except CoordinatorUnreachable as error:
+            if "lease not found" in str(error):  # etcd answered: the lease is gone
+                self._lease = None
+                return 0.0
+            raise
         ttl = float(getattr(reply, "TTL", 0) or 0)
         if ttl <= 0:
             self._lease = None

@@ -21,6 +21,8 @@ from softplc.core.plant import StateRefused
 
 log = logging.getLogger(__name__)
 
+SILENCE = 3.0  # s without a frame from the active before the link counts as broken
+
 
 class SyncClient:
     """One connection to the active (see the module docstring); `run()` returns when it ends."""
@@ -39,12 +41,13 @@ class SyncClient:
         adapter = self.adapter
         plant = adapter.plant
         host, port = self.address
-        reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), HANDSHAKE_TIMEOUT)
         try:
-            try:
-                await asyncio.wait_for(writer.start_tls(self.context, server_hostname=f"softplc-{self.active}"), HANDSHAKE_TIMEOUT)
-            except ssl.SSLError as error:
-                raise LinkRefused(f"TLS handshake with {host}:{port} failed ({error.reason or error}): not the pinned peer") from None
+            reader, writer = await asyncio.wait_for(asyncio.open_connection(
+                host, port, ssl=self.context, server_hostname=f"softplc-{self.active}", ssl_handshake_timeout=HANDSHAKE_TIMEOUT),
+                HANDSHAKE_TIMEOUT + 1)
+        except ssl.SSLError as error:
+            raise LinkRefused(f"TLS handshake with {host}:{port} failed ({error.reason or error}): not the pinned peer") from None
+        try:
             der = writer.get_extra_info("ssl_object").getpeercert(binary_form=True)
             if der is None or fingerprint_of_der(der) != self.peer_fingerprint:
                 raise LinkRefused(f"{host}:{port} presents a certificate that is not the peer's pinned one")
@@ -61,7 +64,9 @@ class SyncClient:
             counter = 0
             replication = plant.replication
             while True:
-                message = await read_message(reader)
+                # The active sends a state every cycle, or a heartbeat every 0.2 s: silence means a
+                # half-open link (a frozen active, a cut cable) — reconnect rather than wait for ever.
+                message = await asyncio.wait_for(read_message(reader), SILENCE)
                 counter += 1
                 payload = check_data(message, epoch, counter)
                 if not isinstance(payload, list) or not payload:

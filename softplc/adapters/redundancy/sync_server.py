@@ -73,8 +73,15 @@ class SyncServer:
         self.port = 0
 
     async def start(self, host: str, port: int) -> None:
-        self._server = await asyncio.start_server(self._accept, host, port, reuse_address=True)
+        loop = asyncio.get_running_loop()
+        self._server = await loop.create_server(lambda: _Unread(self._upgrade), host, port, reuse_address=True)
         self.port = self._server.sockets[0].getsockname()[1]
+
+    def _upgrade(self, transport: asyncio.Transport) -> None:
+        """A new connection, not read from yet: TLS first (every byte the peer sent goes to the handshake)."""
+        task = asyncio.ensure_future(self._accept_tls(transport))
+        self._handlers.add(task)
+        task.add_done_callback(self._handlers.discard)
 
     async def stop(self) -> None:
         self.drop("this runtime stops")
@@ -116,12 +123,26 @@ class SyncServer:
 
     # -- accepting -------------------------------------------------------------------------
 
-    async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        assert task is not None
-        self._handlers.add(task)
-        peer = writer.get_extra_info("peername")
+    async def _accept_tls(self, transport: asyncio.Transport) -> None:
+        peer = transport.get_extra_info("peername")
         where = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
+        loop = asyncio.get_running_loop()
+        reader = asyncio.StreamReader()
+        protocol = asyncio.StreamReaderProtocol(reader)
+        try:
+            secured = await asyncio.wait_for(loop.start_tls(transport, protocol, self.context, server_side=True), HANDSHAKE_TIMEOUT)
+        except (ssl.SSLError, asyncio.TimeoutError, ConnectionError, OSError) as error:
+            transport.close()
+            self.adapter.refused(f"sync link from {where}: TLS handshake failed ({_reason(error)}): not the pinned peer")
+            return
+        if secured is None:
+            transport.close()
+            return
+        protocol.connection_made(secured)
+        writer = asyncio.StreamWriter(secured, protocol, reader, loop)
+        await self._accept(reader, writer, where)
+
+    async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, where: str) -> None:
         try:
             await self._serve(reader, writer, where)
         except LinkRefused as refused:
@@ -131,17 +152,12 @@ class SyncServer:
             if self.standby is not None and self.standby.writer is writer:
                 self._lost(self.standby, f"the link broke ({type(error).__name__})")
         finally:
-            self._handlers.discard(task)
             if self.standby is not None and self.standby.writer is writer:
                 self._lost(self.standby, "the link closed")
             writer.close()
 
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, where: str) -> None:
         adapter = self.adapter
-        try:
-            await asyncio.wait_for(writer.start_tls(self.context), HANDSHAKE_TIMEOUT)
-        except (ssl.SSLError, asyncio.TimeoutError, ConnectionError, OSError) as error:
-            raise LinkRefused(f"TLS handshake failed ({_reason(error)}): not the pinned peer") from None
         der = writer.get_extra_info("ssl_object").getpeercert(binary_form=True)
         if der is None or fingerprint_of_der(der) != self.peer_fingerprint:
             raise LinkRefused("its certificate is not the peer's pinned certificate")
@@ -191,4 +207,13 @@ def _reason(error: BaseException) -> str:
     return getattr(error, "reason", None) or type(error).__name__
 
 
-Callback = Callable[[str], None]
+class _Unread(asyncio.Protocol):
+    """A connection's first protocol: it reads nothing, so the TLS handshake that follows gets every byte."""
+
+    def __init__(self, upgrade: Callable[[asyncio.Transport], None]) -> None:
+        self.upgrade = upgrade
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        transport.pause_reading()
+        self.upgrade(transport)
