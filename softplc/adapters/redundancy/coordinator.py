@@ -58,7 +58,15 @@ class Coordinator:
                 if self._client is None:
                     host, port = self.endpoints[self._index]
                     self._client = aetcd.Client(host, port, timeout=self.timeout, connect_wait_timeout=1)
-                return await asyncio.wait_for(getattr(self._client, method)(*args, **kwargs), self.timeout + 0.1)
+                # Not asyncio.wait_for: it waits for the call to finish cancelling, and a gRPC call
+                # stuck on a dead channel may never finish; the member must get on with its life.
+                call = asyncio.ensure_future(getattr(self._client, method)(*args, **kwargs))
+                done, _ = await asyncio.wait({call}, timeout=self.timeout + 0.1)
+                if not done:
+                    call.cancel()
+                    call.add_done_callback(_consume)
+                    raise asyncio.TimeoutError()
+                return call.result()
             except (aetcd.ClientError, asyncio.TimeoutError, OSError) as error:
                 last = error
                 await self._drop_client()
@@ -68,10 +76,11 @@ class Coordinator:
     async def _drop_client(self) -> None:
         client, self._client = self._client, None
         if client is not None:
-            try:
-                await asyncio.wait_for(client.close(), 0.5)
-            except Exception:  # a dead channel: nothing to close politely
-                pass
+            closing = asyncio.ensure_future(client.close())
+            done, _ = await asyncio.wait({closing}, timeout=0.5)
+            if not done:
+                closing.cancel()
+            closing.add_done_callback(_consume)
 
     def _describe(self) -> str:
         return ", ".join(f"{host}:{port}" for host, port in self.endpoints)
@@ -152,6 +161,12 @@ class Coordinator:
 
     async def close(self) -> None:
         await self._drop_client()
+
+
+def _consume(call: asyncio.Future[Any]) -> None:
+    """Fetch an abandoned call's outcome, so asyncio does not report it as never retrieved."""
+    if not call.cancelled():
+        call.exception()
 
 
 def _describe(error: BaseException | None) -> str:

@@ -31,6 +31,7 @@ RedundancyAdapter = Any
 log = logging.getLogger(__name__)
 
 RECONNECT = 0.2  # s between two attempts to reach the active's sync link
+STARTUP_GRACE = 5.0  # s the non-preferred member waits at start-up before it campaigns
 
 
 def margin(lease: float) -> float:
@@ -42,7 +43,9 @@ async def live(adapter: RedundancyAdapter) -> None:
     """Stand by and be active, in turn, for the adapter's lifetime."""
     settings = adapter.settings
     if settings.preferred != settings.me.name:
-        await stand_by(adapter, grace=float(settings.lease_seconds))
+        # Of two members started at once the preferred one becomes active: the other lets it start
+        # (a process's start-up takes seconds on a busy machine) before it campaigns itself.
+        await stand_by(adapter, grace=max(STARTUP_GRACE, 2.0 * settings.lease_seconds))
     while True:
         await be_active(adapter) if adapter.plant.role.term.role is PlantRole.ACTIVE else await stand_by(adapter)
 
@@ -67,8 +70,11 @@ async def stand_by(adapter: RedundancyAdapter, grace: float = 0.0) -> None:
             if holder is not None and holder.mine:
                 take_over(adapter, holder, sent)
                 return
-            if grace and sent >= campaign_from:
-                return  # the grace is over: campaign from the main loop
+            if holder is None and following and adapter.coordinator_ok:
+                log.info("redundancy: the active's key is gone (its lease ended); %s campaigns", adapter.settings.me.name)
+                following = ""
+            if grace and (sent >= campaign_from or (holder is not None and holder.epoch)):
+                return  # the grace is over (or another member is active already): campaign from the main loop
             active = str(holder.value.get("member", "")) if holder is not None and holder.epoch else ""
             if holder is not None and holder.epoch and active != following:
                 adapter.saw_active(holder)

@@ -164,6 +164,24 @@ async def pair(tmp_path_factory: Any) -> Any:
         etcd.remove()
 
 
+async def softplc(*arguments: str) -> tuple[int, str]:
+    """Run a `softplc` client command (its own process: the test's loop keeps serving the proxy)."""
+    import os
+    import sys
+
+    environment = {**os.environ, "SOFTPLC_PASSWORD": PASSWORD}
+    process = await asyncio.create_subprocess_exec(sys.executable, "-m", "softplc", *arguments, env=environment,
+                                                   stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
+    output, _ = await asyncio.wait_for(process.communicate(), 60)
+    return process.returncode or 0, output.decode()
+
+
+def both(pair: Pair, first: str) -> str:
+    """Both endpoints, `first` first: the CLI must find the active whatever the order."""
+    other = next(name for name in pair.members if name != first)
+    return f"{pair.members[first].endpoint},{pair.members[other].endpoint}"
+
+
 def no_overlap(pair: Pair) -> None:
     assert pair.device.overlaps() == [], "two actives drove outputs at once"
 
@@ -179,10 +197,17 @@ async def continuity(pair: Pair, observer: Observer, active: str) -> None:
 
 async def test_both_started_at_once_the_preferred_member_is_active(pair: Any) -> None:
     pair, observer = pair
-    assert await observer.settle() == "a"
+    assert await observer.settle(60) == "a"  # two processes starting on a busy machine: OPC UA alone takes seconds
     assert (await observer.read("b", "_sys.redundancy.active", "_sys.redundancy.service_level")) == ["a", 100]
     assert (await observer.read("a", "_sys.redundancy.service_level"))[0] == 255
     assert (await observer.write("b", "spare", 5)) == "BadInvalidState"  # the standby refuses, naming no one in OPC UA
+    # the CLI given both endpoints, the standby's first, writes to the active; given the standby
+    # alone it says who the active is
+    code, output = await softplc("write", "spare=77", "--endpoint", both(pair, "b"), "--user", "olga")
+    assert code == 0, output
+    assert (await observer.read("a", "spare")) == [77]
+    code, output = await softplc("write", "spare=78", "--endpoint", pair.members["b"].endpoint, "--user", "olga")
+    assert code == 1 and "not active: this runtime (b) is the standby of its redundant pair: write to the active, a" in output, output
     no_overlap(pair)
 
 
@@ -221,12 +246,16 @@ async def test_kill_9_of_the_active_the_standby_serves_writes_in_about_a_second_
     ha = HaClient(HaConfig(HaMode.WARM, keepalive_timer=1, manager_timer=1, reconciliator_timer=1, session_timeout=10,
                            request_timeout=2, urls=[member.endpoint for member in pair.members.values()]))
     await ha.start()
-    node = await follow_with_node(pair, 14)
+    node = await follow_with_node(pair, 25)
+    seen: list[str] = []
     try:
-        deadline = time.monotonic() + 8
+        deadline = time.monotonic() + 15
         while ha.active_client is None or ha.active_client.server_url.geturl() != pair.members[active].endpoint:
             assert time.monotonic() < deadline, "HaClient never chose the active"
             await asyncio.sleep(0.1)
+        assert node.stdout is not None
+        while not any(f'"using":"{pair.members[active].endpoint}"' in line for line in seen):
+            seen.append((await asyncio.wait_for(node.stdout.readline(), max(0.1, deadline - time.monotonic()))).decode())
         writer = Writer(observer)
         writer.start(first=1000)
         await asyncio.sleep(1.0)
@@ -247,13 +276,16 @@ async def test_kill_9_of_the_active_the_standby_serves_writes_in_about_a_second_
         assert before is not None and before.scans <= first.scans <= before.scans + 1, (before, first)  # ≤ 1 cycle of state lost
         assert first.epoch > before.epoch
         await continuity(pair, observer, standby)
+        code, output = await softplc("read", "spare", "--endpoint", both(pair, active))  # the old active is dead: the new one answers
+        assert code == 0 and str(spare) in output, output
         deadline = time.monotonic() + 10
         while ha.active_client is None or ha.active_client.server_url.geturl() != pair.members[standby].endpoint:
             assert time.monotonic() < deadline, "HaClient did not fail over to the new active"
             await asyncio.sleep(0.1)
-        stdout, stderr = await asyncio.wait_for(node.communicate(), 30)
-        lines = [json.loads(line[len("ACTIVE "):]) for line in stdout.decode().splitlines() if line.startswith("ACTIVE ")]
-        result = [json.loads(line[len("RESULT "):]) for line in stdout.decode().splitlines() if line.startswith("RESULT ")]
+        stdout, stderr = await asyncio.wait_for(node.communicate(), 40)
+        output = "".join(seen) + stdout.decode()
+        lines = [json.loads(line[len("ACTIVE "):]) for line in output.splitlines() if line.startswith("ACTIVE ")]
+        result = [json.loads(line[len("RESULT "):]) for line in output.splitlines() if line.startswith("RESULT ")]
         assert result, stderr.decode()[-2000:]
         assert [line["using"] for line in lines if line["using"]][-2:] == [pair.members[active].endpoint, pair.members[standby].endpoint]
         redundancy = result[0]["redundancy"][pair.members[standby].endpoint]
