@@ -102,16 +102,24 @@ class SyncServer:
     # -- feeding ---------------------------------------------------------------------------
 
     def send_cycle(self, plant: Plant, task: TaskView) -> None:
-        """At a cycle boundary: capture what changed and send it (nothing when no standby listens)."""
+        """At a cycle boundary: capture what changed (nothing when no standby listens); it is encoded and sent just after.
+
+        Only the capture runs inside the boundary (it must: it is the cycle's state); encoding and
+        the TLS write follow as the loop's next callback, in order with journal entries sent later.
+        """
         standby = self.standby
         if standby is None:
             return
         state = plant.replication.capture(task)
         standby.sent_sequence = state[1]
+        asyncio.get_running_loop().call_soon(self._send_state, standby, state)
+
+    def _send_state(self, standby: StandbyConnection, state: list[Any]) -> None:
         if not standby.send(state):
             self._lost(standby, "it could not keep up (its backlog passed the limit) or went away")
 
     def send_journal(self, message: list[Any]) -> None:
+        """Send journaled writes at once, before the writer is answered (a state captured earlier may follow them)."""
         standby = self.standby
         if standby is not None and not standby.send(message):
             self._lost(standby, "it could not keep up or went away")
