@@ -21,7 +21,7 @@ work="$here/work"
 mkdir -p "$work"
 [ -f "$work/pair/a.crt" ] || "$python" -m softplc redundancy keys "$work/pair" >/dev/null
 # The default plant, with its file references pointing back at the repository, and a pair.
-sed -e 's#robots/#../../../robots/#g' "$repo/tagdb.yaml" > "$work/tagdb.yaml"
+sed -E 's#(^|[ "])(robots|hmi)/#\1../../../\2/#g' "$repo/tagdb.yaml" > "$work/tagdb.yaml"
 cat >> "$work/tagdb.yaml" <<'YAML'
 
 redundancy:                      # added by examples/redundant-pair/run.sh (docs/redundancy.md)
