@@ -58,7 +58,11 @@ async def faults(args: argparse.Namespace) -> int:
     etcd = EtcdServer()
     etcd.start()
     folder = Path(tempfile.mkdtemp(prefix="softplc-bench-pair-"))
-    pair = Pair(folder, etcd)
+    try:
+        pair = Pair(folder, etcd)
+    except BaseException:
+        etcd.remove()
+        raise
     await pair.start()
     observer = Observer(pair)
     takeovers: list[float] = []
@@ -242,10 +246,15 @@ async def cost(args: argparse.Namespace) -> int:
         task = runtime.tasks[0]
         scans = list(task.stats.scan.values) if hasattr(task.stats.scan, "values") else []
     finally:
-        standby.terminate()
-        standby.wait(timeout=20)
-        await runtime.stop()
-        etcd.remove()
+        try:
+            await runtime.stop()
+        finally:
+            standby.terminate()
+            try:
+                standby.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                standby.kill()
+            etcd.remove()
     interval = runtime.tasks[0].interval
     print(f"sync cost at the active's scan boundary, {args.tags} tags changing every {args.interval} cycle "
           f"(n={len(costs)}): p50 {percentile(costs, 50) * 1e3:.3f} ms, p99 {percentile(costs, 99) * 1e3:.3f} ms, "

@@ -155,12 +155,27 @@ class Coordinator:
             except CoordinatorUnreachable as error:
                 log.warning("redundancy: could not give up the active role at once (%s); the peer takes over when the lease ends", error)
 
+    @property
+    def lease_id(self) -> int | None:
+        return int(self._lease.id) if self._lease is not None else None
+
+    def adopt(self, lease_id: int) -> None:
+        """Renew a lease granted through another client (the lease keeper's thread has its own)."""
+        self._lease = _LeaseId(lease_id)
+
     def forget_lease(self) -> None:
         """The lease is lost (it lapsed): the next campaign asks for a new one."""
         self._lease = None
 
     async def close(self) -> None:
         await self._drop_client()
+
+
+class _LeaseId:
+    """A lease known by its id only (what `refresh_lease` and `revoke_lease` need)."""
+
+    def __init__(self, lease_id: int) -> None:
+        self.id = lease_id
 
 
 def _consume(call: asyncio.Future[Any]) -> None:

@@ -5,7 +5,8 @@ nobody holds it"); while another member holds the key it follows that one over t
 The non-preferred member waits one lease at start-up before its first attempt, so that of two
 runtimes started at once the preferred one becomes active.
 
-Active, it renews its lease every quarter lease. Each renewal that etcd confirms extends the
+Active, it renews its lease every quarter lease, from a thread of its own (lease_keeper.py: a
+busy event loop must not lose the lease). Each renewal that etcd confirms extends the
 plant's ACTIVE term to (the moment the renewal was *sent*) + TTL − margin: etcd counts the lease
 from when it received the renewal, later than that, so the term always ends before the lease
 can. A member that cannot renew — etcd unreachable, the process frozen, the network cut — is
@@ -21,6 +22,7 @@ import logging
 from typing import Any
 
 from softplc.adapters.redundancy.coordinator import CoordinatorUnreachable, Holder
+from softplc.adapters.redundancy.lease_keeper import LeaseKeeper
 from softplc.adapters.redundancy.link import LinkRefused
 from softplc.adapters.redundancy.sync_client import SyncClient
 from softplc.core.plant_role import PlantRole, RoleTerm
@@ -117,26 +119,27 @@ def take_over(adapter: RedundancyAdapter, holder: Holder, sent: float) -> None:
 
 
 async def be_active(adapter: RedundancyAdapter) -> None:
-    """Renew the lease every quarter lease; return when it is lost (then this member is FENCED)."""
+    """Keep the lease (renewed from a thread, lease_keeper.py); return when it is lost (then this member is FENCED)."""
     plant = adapter.plant
     clock = plant.clock
     settings = adapter.settings
     period = settings.lease_seconds / 4
-    while True:
-        await clock.sleep(period)
-        sent = clock.now()
-        try:
-            ttl = await adapter.coordinator.renew()
-            adapter.coordinator_answered(True)
-        except CoordinatorUnreachable as error:
-            adapter.coordinator_answered(False, str(error))
-            adapter.publish()  # a lapsed term shows as FENCED at once
-            continue
-        if ttl > 0:
-            plant.role.renew(sent + ttl - margin(ttl))
-            continue
-        lost(adapter, "its lease has expired (another member may be active now)")
+    lease_id = adapter.coordinator.lease_id
+    if lease_id is None:
+        lost(adapter, "it holds no lease")
         return
+    keeper = LeaseKeeper(adapter.coordinator, lease_id, plant.role, clock.now, margin, period)
+    keeper.start()
+    try:
+        while True:
+            await clock.sleep(period)
+            if keeper.lost:
+                lost(adapter, "its lease has expired (another member may be active now)")
+                return
+            adapter.coordinator_answered(not keeper.error, keeper.error)
+            adapter.publish()  # a lapsed term shows as FENCED at once
+    finally:
+        keeper.stop()
 
 
 def lost(adapter: RedundancyAdapter, why: str) -> None:

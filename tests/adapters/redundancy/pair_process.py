@@ -98,11 +98,16 @@ class Proxy:
         self.cut = False
         self._server: asyncio.AbstractServer | None = None
         self._streams: list[asyncio.StreamWriter] = []
+        self._handlers: set[asyncio.Task[Any]] = set()
 
     async def start(self) -> None:
         self._server = await asyncio.start_server(self._serve, "127.0.0.1", self.port)
 
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        if task is not None:
+            self._handlers.add(task)
+            task.add_done_callback(self._handlers.discard)
         if self.cut:
             writer.close()
             return
@@ -140,6 +145,7 @@ class Proxy:
         self.sever()
         if self._server is not None:
             self._server.close()
+        await asyncio.gather(*self._handlers, return_exceptions=True)
 
 
 class Member:

@@ -153,14 +153,16 @@ async def pair(tmp_path_factory: Any) -> Any:
             raise
         pytest.skip(str(error))
     etcd.start()
-    pair = Pair(tmp_path_factory.mktemp("pair"), etcd)
-    await pair.start()  # both at once
-    observer = Observer(pair)
     try:
-        yield pair, observer
+        pair = Pair(tmp_path_factory.mktemp("pair"), etcd)
+        await pair.start()  # both at once
+        observer = Observer(pair)
+        try:
+            yield pair, observer
+        finally:
+            await observer.close()
+            await pair.stop()
     finally:
-        await observer.close()
-        await pair.stop()
         etcd.remove()
 
 
@@ -277,7 +279,9 @@ async def test_kill_9_of_the_active_the_standby_serves_writes_in_about_a_second_
         assert first.epoch > before.epoch
         await continuity(pair, observer, standby)
         code, output = await softplc("read", "spare", "--endpoint", both(pair, active))  # the old active is dead: the new one answers
-        assert code == 0 and str(spare) in output, output
+        assert code == 0, output
+        shown = int(next(line for line in output.splitlines() if line.startswith("spare")).split()[1])
+        assert shown >= spare, output  # (a write cancelled in flight by the writer's stop may land after `spare` was read)
         deadline = time.monotonic() + 10
         while ha.active_client is None or ha.active_client.server_url.geturl() != pair.members[standby].endpoint:
             assert time.monotonic() < deadline, "HaClient did not fail over to the new active"
@@ -287,14 +291,16 @@ async def test_kill_9_of_the_active_the_standby_serves_writes_in_about_a_second_
         lines = [json.loads(line[len("ACTIVE "):]) for line in output.splitlines() if line.startswith("ACTIVE ")]
         result = [json.loads(line[len("RESULT "):]) for line in output.splitlines() if line.startswith("RESULT ")]
         assert result, stderr.decode()[-2000:]
-        assert [line["using"] for line in lines if line["using"]][-2:] == [pair.members[active].endpoint, pair.members[standby].endpoint]
+        usings = [line["using"] for line in lines if line["using"]]
+        assert usings and usings[-1] == pair.members[standby].endpoint, output  # it used the active, and follows the new one
+        assert pair.members[active].endpoint in usings, output
         redundancy = result[0]["redundancy"][pair.members[standby].endpoint]
         assert redundancy["support"] == 3 and sorted(redundancy["uris"]) == ["urn:softplc:pairtest:a", "urn:softplc:pairtest:b"]
     finally:
         await ha.stop()
         if node.returncode is None:
             node.kill()
-    pair.members[active].start()  # the old active returns: as the standby, and resyncs
+        pair.members[active].start()  # the old active returns: as the standby, and resyncs
     assert await observer.settle(25) == standby
     no_overlap(pair)
 
