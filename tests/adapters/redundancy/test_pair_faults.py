@@ -297,10 +297,12 @@ async def test_kill_9_of_the_active_the_standby_serves_writes_in_about_a_second_
         redundancy = result[0]["redundancy"][pair.members[standby].endpoint]
         assert redundancy["support"] == 3 and sorted(redundancy["uris"]) == ["urn:softplc:pairtest:a", "urn:softplc:pairtest:b"]
     finally:
-        await ha.stop()
+        pair.members[active].start()  # the old active returns: as the standby, and resyncs
         if node.returncode is None:
             node.kill()
-        pair.members[active].start()  # the old active returns: as the standby, and resyncs
+        # HaClient.stop() may wait for ever on a client of the dead server (its reconnect loop):
+        # give it a few seconds, never the whole test.
+        await asyncio.wait({asyncio.ensure_future(ha.stop())}, timeout=5)
     assert await observer.settle(25) == standby
     no_overlap(pair)
 
