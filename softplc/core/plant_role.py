@@ -20,6 +20,7 @@ from __future__ import annotations
 import enum
 import logging
 import math
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -54,6 +55,7 @@ class RoleHolder:
         self.term = RoleTerm()
         self._callbacks: list[RoleCallback] = []
         self._lapsed_told = False
+        self._lock = threading.Lock()  # `renew` may come from another thread (a lease keeper)
 
     @property
     def role(self) -> PlantRole:
@@ -90,9 +92,10 @@ class RoleHolder:
 
     def set(self, term: RoleTerm) -> None:
         """Take a new term (role, epoch, end); listeners hear of a change of role or epoch."""
-        previous = self.term
-        self.term = term
-        self._lapsed_told = False
+        with self._lock:
+            previous = self.term
+            self.term = term
+            self._lapsed_told = False
         if (previous.role, previous.epoch, previous.active) == (term.role, term.epoch, term.active):
             return
         for callback in list(self._callbacks):
@@ -101,11 +104,15 @@ class RoleHolder:
             except Exception:  # a broken listener must not keep the role from changing
                 log.exception("role listener %r failed", callback)
 
-    def renew(self, until: float) -> None:
-        """Extend the ACTIVE term to `until` (a renewed lease): no listener is told."""
-        term = self.term
-        if term.role is PlantRole.ACTIVE and until > term.until:
-            self.term = RoleTerm(term.role, term.epoch, until, term.active, term.detail)
+    def renew(self, until: float, epoch: int | None = None) -> None:
+        """Extend the ACTIVE term (of `epoch`, if given) to `until` (a renewed lease): no listener is told.
+
+        Safe from another thread: a term set meanwhile (fenced, stopping) is never revived.
+        """
+        with self._lock:
+            term = self.term
+            if term.role is PlantRole.ACTIVE and until > term.until and (epoch is None or term.epoch == epoch):
+                self.term = RoleTerm(term.role, term.epoch, until, term.active, term.detail)
 
     def on_change(self, callback: RoleCallback) -> Callable[[], None]:
         """Call `callback(term)` whenever the role, the epoch or the active changes; returns an undo."""

@@ -46,8 +46,15 @@ def test_an_active_term_lapses_at_its_end_and_a_renewal_extends_it() -> None:
     now[0] = 3.0
     assert not holder.is_active() and holder.role is PlantRole.FENCED
     assert "epoch 3" in holder.refusal() and "lapsed" in holder.refusal()
+    holder.set(RoleTerm(PlantRole.FENCED, 3))
+    holder.renew(10.0, 3)  # a lease keeper's late renewal never revives a term set meanwhile
+    assert holder.role is PlantRole.FENCED
+    holder.set(RoleTerm(PlantRole.ACTIVE, 4, until=3.5))
+    holder.renew(10.0, 3)  # nor extends another epoch's
+    assert holder.term.until == 3.5
     holder.set(RoleTerm(PlantRole.STANDBY, 4, active="b", detail="write to the active, b"))
-    assert holder.refusal() == "write to the active, b" and [term.role for term in heard] == [PlantRole.ACTIVE, PlantRole.STANDBY]
+    assert holder.refusal() == "write to the active, b"
+    assert [term.role for term in heard] == [PlantRole.ACTIVE, PlantRole.FENCED, PlantRole.ACTIVE, PlantRole.STANDBY]
 
 
 async def test_a_lapsed_term_stops_the_scan_and_the_writes_at_once_and_a_new_term_resumes_them(

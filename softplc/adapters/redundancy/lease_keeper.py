@@ -33,6 +33,7 @@ class LeaseKeeper:
         self.timeout = coordinator.timeout
         self.lease_id = lease_id
         self.role = role
+        self.epoch = role.epoch  # the term it renews: never another one
         self.now = now
         self.margin = margin
         self.period = period
@@ -67,7 +68,7 @@ class LeaseKeeper:
                         self.lost = True
                         return
                     self.renewals += 1
-                    self.role.renew(sent + ttl - self.margin(ttl))
+                    self.role.renew(sent + ttl - self.margin(ttl), self.epoch)
                 await asyncio.sleep(max(0.0, sent + self.period - self.now()))
         finally:
             await coordinator.close()
