@@ -26,6 +26,8 @@ command -v prometheus >/dev/null 2>&1 || apt_packages+=(prometheus)
 command -v systemd-analyze >/dev/null 2>&1 || apt_packages+=(systemd)
 # The MQTT users (VDA 5050, Sparkplug B) are tested against a real broker (tests/mosquitto_server.py).
 command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ] || apt_packages+=(mosquitto)
+# A redundant pair is coordinated by etcd (tests/etcd_server.py starts Debian's etcd-server on loopback ports).
+command -v etcd >/dev/null 2>&1 || apt_packages+=(etcd-server)
 if [ ${#apt_packages[@]} -gt 0 ]; then
   echo "installing system packages: ${apt_packages[*]}" >&2
   # apt-install.sh tries again with backoff: apt often fails once right after a machine boots.

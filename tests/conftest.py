@@ -106,3 +106,30 @@ def mosquitto():
         yield server
     finally:
         server.stop()
+
+
+# -- etcd: the redundant pair's coordinator ----------------------------------------------------------
+
+
+@pytest.fixture
+def etcd():
+    """A single-node etcd on free loopback ports for one test (stop() and start() it to restart it).
+
+    Skipped when etcd is missing, except under CI (CI=true), where scripts/install-test-tools.sh
+    must have installed it: there it fails.
+    """
+    import os
+
+    from tests.etcd_server import EtcdServer, EtcdUnavailable
+
+    try:
+        server = EtcdServer()
+    except EtcdUnavailable as error:
+        if os.environ.get("CI"):
+            raise
+        pytest.skip(str(error))
+    server.start()
+    try:
+        yield server
+    finally:
+        server.remove()

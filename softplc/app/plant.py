@@ -12,7 +12,8 @@ from softplc.config.plant import PlantConfig
 from softplc.core.clock import Clock
 from softplc.core.commands import Commands
 from softplc.core.events import EventBus
-from softplc.core.plant import TaskView, ThreadGate
+from softplc.core.plant import StateReplication, TaskView, ThreadGate
+from softplc.core.plant_role import RoleHolder
 from softplc.core.tagdb import TagDatabase
 
 log = logging.getLogger(__name__)
@@ -27,6 +28,7 @@ class _Runtime(Protocol):
     commands: Commands
     events: EventBus
     state_dir: Path
+    role: RoleHolder
     engine: Any
     adapters: list[Any]
     state: Any
@@ -34,6 +36,9 @@ class _Runtime(Protocol):
 
     @property
     def scan_gate(self) -> ThreadGate | None: ...
+
+    @property
+    def replication(self) -> StateReplication: ...
 
     def spawn(self, coroutine: Coroutine[Any, Any, Any], name: str) -> asyncio.Task[Any]: ...
 
@@ -49,6 +54,7 @@ class RuntimePlant:
         self.commands = runtime.commands
         self.events = runtime.events
         self.state_dir = runtime.state_dir
+        self.role = runtime.role
         self._failing: set[str] = set()  # adapters whose metrics() raised (logged once)
 
     @property
@@ -66,6 +72,10 @@ class RuntimePlant:
     @property
     def gate(self) -> ThreadGate | None:
         return self._runtime.scan_gate
+
+    @property
+    def replication(self) -> StateReplication:
+        return self._runtime.replication
 
     def spawn(self, coroutine: Coroutine[Any, Any, Any], name: str) -> asyncio.Task[Any]:
         return self._runtime.spawn(coroutine, name)

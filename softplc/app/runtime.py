@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from softplc.app.plant import RuntimePlant
-from softplc.core.clock import Clock, RealClock, SimClock
+from softplc.core.clock import Clock, PlantTime, RealClock, SimClock
 from softplc.core.commands import Commands
 from softplc.config import PlantConfig
 from softplc.util.durations import parse_duration
@@ -26,6 +26,7 @@ from softplc.core.events import EventBus
 from softplc.core.expression import Condition
 from softplc.engine.online_change.change import OnlineChange
 from softplc.core.plant import Adapter, AdapterError
+from softplc.core.plant_role import RoleHolder
 from softplc.core.program import ProgramContext
 from softplc.util.plurals import plural
 from softplc.engine.program_control import register_program_commands
@@ -74,11 +75,19 @@ class Runtime:
         self.clock = clock or RealClock()
         self.state_dir = state_dir or config.state_dir
         self.db = TagDatabase([*config.tags, *runtime_tag_definitions(config)], self.clock.wall)
+        # The plant's role in a redundant pair (ACTIVE alone): the engine scans and the tag
+        # database accepts writes only while it is active (softplc/core/plant_role.py).
+        self.role = RoleHolder(self.clock.now)
+        self.db.role = self.role
+        self.program_clock = PlantTime(self.clock)  # what programs and their timers read (softplc/core/clock.py)
         self.tasks = [self._build_task(task) for task in config.tasks]
         self.engine = ScanEngine(self.clock, self.db, self.tasks)
+        self.engine.role = self.role
+        self._replication: Any = None
         self.engine.after_cycle(self._after_cycle)
         self.system_tags = SystemTags(self.db, self.engine, self._state_for_tags, self.reset_faults)
         self.commands = Commands(self.clock.wall)
+        self.commands.refusal = self.role.refusal  # a standby carries out no action (queries only)
         self.events = EventBus()
         register_runtime_commands(self)
         register_program_commands(self)
@@ -106,7 +115,7 @@ class Runtime:
         instances = []
         for program in task.programs:
             try:
-                created = program.cls(ProgramContext(program.name, self.clock, dict(program.params)))
+                created = program.cls(ProgramContext(program.name, self.program_clock, dict(program.params), self.role))
             except Exception as error:  # user code: say which program and where, never a traceback
                 where = program.location or Location(str(self.config.path), 1, 1)
                 message = f"program '{program.name}' ({program.reference}) cannot be created: {type(error).__name__}: {error}"
@@ -135,6 +144,16 @@ class Runtime:
 
             self._scan_gate = ScanGate(self.engine, self.clock)
         return self._scan_gate
+
+    @property
+    def replication(self) -> Any:
+        """The plant's state for a standby (softplc/engine/replication_wire.py), made on first use: it follows every change."""
+        if self._replication is None:
+            from softplc.engine.replication import Replication
+            from softplc.engine.replication_wire import ReplicationDoor
+
+            self._replication = ReplicationDoor(Replication(self.db, self.tasks, self.program_clock, self.clock))
+        return self._replication
 
     @property
     def stopping(self) -> bool:

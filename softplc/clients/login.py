@@ -8,7 +8,9 @@
 - `--endpoint URL`, else the `servers.opcua` endpoint of the plant's configuration (`--config
   FILE`, default `tagdb.yaml` if there is one here), else a softplc on this machine
   (`opc.tcp://127.0.0.1:4840/softplc/`); the tags' namespace likewise (`--namespace URI`, else the
-  configuration's, else `urn:softplc:tags`);
+  configuration's, else `urn:softplc:tags`). A redundant pair: `--endpoint URL1,URL2` (or a
+  configuration whose `redundancy:` section names the members' `opcua:` endpoints) — the command
+  connects to the one whose ServiceLevel says it is active (≥ 200; docs/redundancy.md);
 - `--user NAME`, the password from `--password-stdin` (the first line of stdin), else the
   environment (`$SOFTPLC_PASSWORD`; `softplc latency`: `$SOFTPLC_LATENCY_PASSWORD`), else a
   prompt when stdin is a terminal — never on the command line, where `ps` shows it; without
@@ -121,6 +123,11 @@ class Login:
     timeout: float = 4.0
     namespace: str = DEFAULT_NAMESPACE
 
+    @property
+    def endpoints(self) -> list[str]:
+        """The endpoints given (several for a redundant pair: comma separated)."""
+        return [part.strip() for part in self.endpoint.split(",") if part.strip()] or [DEFAULT_ENDPOINT]
+
 
 def _security_argument(text: str) -> Security:
     try:
@@ -142,8 +149,9 @@ def add_login_arguments(
     """Add --endpoint, --config, --namespace and --timeout (unless the command has its own), --user, --password-stdin, --security."""
     group = parser.add_argument_group("connection and login (OPC UA)")
     if endpoint:
-        group.add_argument("--endpoint", metavar="URL", type=endpoint_url,
-                           help=f"the runtime's OPC UA endpoint (default: servers.opcua.endpoint of --config, else {DEFAULT_ENDPOINT})")
+        group.add_argument("--endpoint", metavar="URL", type=endpoint_urls,
+                           help=f"the runtime's OPC UA endpoint (default: servers.opcua.endpoint of --config, else {DEFAULT_ENDPOINT}); "
+                           "a redundant pair's two endpoints comma separated: the active one is used")
         group.add_argument("--config", metavar="FILE",
                            help=f"the plant's configuration, for its endpoint and namespace (default {DEFAULT_CONFIG} if there is one here)")
         group.add_argument("--namespace", metavar="URI",
@@ -186,6 +194,11 @@ def endpoint_url(text: str) -> str:
     if problem is not None:
         raise argparse.ArgumentTypeError(f"{text!r} is not an OPC UA endpoint ({problem}): write opc.tcp://HOST:PORT/PATH, e.g. {DEFAULT_ENDPOINT}")
     return url
+
+
+def endpoint_urls(text: str) -> str:
+    """An `--endpoint` argument naming one endpoint or a redundant pair's, comma separated; each checked like `endpoint_url`."""
+    return ",".join(endpoint_url(part) for part in text.split(",") if part.strip()) or endpoint_url(text)
 
 
 def _seconds(text: str) -> float:
@@ -232,7 +245,7 @@ def where(args: argparse.Namespace) -> tuple[str, str]:
         return endpoint or DEFAULT_ENDPOINT, namespace or DEFAULT_NAMESPACE
     section = _opcua_section(args.config)
     if endpoint is None:
-        endpoint = _reachable(section.get("endpoint")) or DEFAULT_ENDPOINT
+        endpoint = _pair_endpoints(args.config) or _reachable(section.get("endpoint")) or DEFAULT_ENDPOINT
     if namespace is None:
         namespace = section.get("namespace") if isinstance(section.get("namespace"), str) else DEFAULT_NAMESPACE
     return endpoint, namespace
@@ -259,6 +272,25 @@ def _opcua_section(config: str | None) -> dict[str, object]:
     return section if isinstance(section, dict) else {}
 
 
+def _pair_endpoints(config: str | None) -> str | None:
+    """The members' OPC UA endpoints of a redundant pair's configuration, comma separated (None: not a pair)."""
+    from softplc.config.yamlsource import ConfigError, load_yaml
+
+    path = Path(config or DEFAULT_CONFIG)
+    if not path.is_file():
+        return None
+    try:
+        data, _ = load_yaml(path)
+    except (ConfigError, OSError):
+        return None
+    section = data.get("redundancy") if isinstance(data, dict) else None
+    members = section.get("members") if isinstance(section, dict) else None
+    if not isinstance(members, dict):
+        return None
+    endpoints = [_reachable(entry.get("opcua")) for entry in members.values() if isinstance(entry, dict)]
+    return ",".join(endpoint for endpoint in endpoints if endpoint) or None
+
+
 def _reachable(endpoint: object) -> str | None:
     """A configured endpoint as a client here reaches it: a server listening everywhere is reached on loopback."""
     if not isinstance(endpoint, str) or not endpoint.strip():
@@ -279,8 +311,55 @@ def with_certificate(security: Security, directory: Path = DEFAULT_CERTIFICATE_D
     return Security(security.mode, made.certificate, made.private_key)
 
 
+SERVICE_LEVEL_HEALTHY = 200  # OPC UA Part 4 §6.6.2.4.2: 200-255 is a healthy server (a pair's active)
+
+
 async def connect(login: Login, certificate_dir: Path = DEFAULT_CERTIFICATE_DIR) -> Client:
-    """A connected asyncua Client (close it with `await client.disconnect()`); raises LoginError."""
+    """A connected asyncua Client (close it with `await client.disconnect()`); raises LoginError.
+
+    With several endpoints (a redundant pair), the first whose ServiceLevel is healthy (the
+    active), else the one with the highest ServiceLevel (a standby: reads work, writes are refused).
+    """
+    endpoints = login.endpoints
+    if len(endpoints) == 1:
+        return await _connect_one(login, endpoints[0], certificate_dir)
+    best: tuple[int, Client] | None = None
+    failures: list[LoginError] = []
+    for endpoint in endpoints:
+        try:
+            client = await _connect_one(login, endpoint, certificate_dir)
+        except LoginError as error:
+            failures.append(error)
+            continue
+        level = await service_level(client)
+        if level >= SERVICE_LEVEL_HEALTHY:
+            if best is not None:
+                await _close(best[1])
+            return client
+        if best is None or level > best[0]:
+            if best is not None:
+                await _close(best[1])
+            best = (level, client)
+        else:
+            await _close(client)
+    if best is not None:
+        return best[1]
+    refused = [failure for failure in failures if failure.kind == "refused"]
+    raise LoginError("; ".join(str(failure) for failure in failures), "refused" if refused else "connect")
+
+
+async def service_level(client: Client) -> int:
+    """The server's ServiceLevel (255 for a server alone; 0 when it cannot be read)."""
+    from asyncua import ua
+
+    try:
+        value = await client.get_node(ua.NodeId(ua.ObjectIds.Server_ServiceLevel)).read_value()
+    except Exception:  # an old or odd server: count it as the least healthy
+        return 0
+    return int(value) if isinstance(value, int) else 0
+
+
+async def _connect_one(login: Login, endpoint: str, certificate_dir: Path) -> Client:
     from asyncua import ua
 
     from softplc.protocols.opcua_client import ClientCertificate, make_client
@@ -291,7 +370,7 @@ async def connect(login: Login, certificate_dir: Path = DEFAULT_CERTIFICATE_DIR)
         certificate = ClientCertificate(security.certificate, security.key, application_uri(security.certificate))
     try:
         client = await make_client(
-            login.endpoint, user=login.user, password=login.password, certificate=certificate,
+            endpoint, user=login.user, password=login.password, certificate=certificate,
             security="None" if not security.secured else f"Basic256Sha256_{security.mode}", timeout=login.timeout,
         )
     except (ValueError, OSError) as error:
@@ -300,13 +379,13 @@ async def connect(login: Login, certificate_dir: Path = DEFAULT_CERTIFICATE_DIR)
         await client.connect()
     except ua.UaStatusCodeError as error:
         await _close(client)
-        raise LoginError(_refusal(login, error.code, certificate), "refused" if _is_refusal(error.code) else "connect") from None
+        raise LoginError(_refusal(login, error.code, certificate, endpoint), "refused" if _is_refusal(error.code) else "connect") from None
     except (OSError, asyncio.TimeoutError, ConnectionError) as error:
         await _close(client)
-        raise LoginError(f"cannot connect to {login.endpoint}: {_describe(error)} (is `softplc run` serving OPC UA there?)") from None
+        raise LoginError(f"cannot connect to {endpoint}: {_describe(error)} (is `softplc run` serving OPC UA there?)") from None
     except Exception as error:  # asyncua raises plain Exceptions for some protocol mismatches
         await _close(client)
-        raise LoginError(f"cannot connect to {login.endpoint}: {_describe(error)}") from None
+        raise LoginError(f"cannot connect to {endpoint}: {_describe(error)}") from None
     return client
 
 
@@ -338,16 +417,17 @@ def _is_refusal(code: int) -> bool:
     return ua.StatusCode(code).name in REFUSALS
 
 
-def _refusal(login: Login, code: int, certificate: object) -> str:
+def _refusal(login: Login, code: int, certificate: object, endpoint: str | None = None) -> str:
     from asyncua import ua
 
+    endpoint = endpoint or login.endpoint
     name = ua.StatusCode(code).name
     text = REFUSALS.get(name)
     if text is None:
-        return f"cannot open a session on {login.endpoint}: {name}"
-    text = f"{login.endpoint}: {text} ({name})"
+        return f"cannot open a session on {endpoint}: {name}"
+    text = f"{endpoint}: {text} ({name})"
     if login.user is None and name in ("BadUserAccessDenied", "BadIdentityTokenRejected", "BadIdentityTokenInvalid"):
-        text = f"{login.endpoint}: anonymous sessions are refused here: log in with --user NAME ({name})"
+        text = f"{endpoint}: anonymous sessions are refused here: log in with --user NAME ({name})"
     if name in ("BadCertificateUntrusted", "BadSecurityChecksFailed") and certificate is not None:
         text += f"; on the server run: softplc opcua trust {getattr(certificate, 'fingerprint', '?')[:16]}"
     if name == "BadSecurityPolicyRejected" and not login.security.secured:

@@ -220,6 +220,43 @@ class SimClock(Clock):
                 future.set_result(None)
 
 
+class PlantTime(Clock):
+    """The clock programs see: the runtime's clock shifted by an offset (0 unless a redundant pair aligned it).
+
+    Programs keep times in their state (a timer's start, a last-seen moment) on this clock. The
+    two runtimes of a redundant pair have clocks that started at different moments; a standby
+    shifts its programs' time onto the active's (`align`), so when it takes over with the
+    active's program state, a timer started there goes on exactly where it was.
+    """
+
+    def __init__(self, base: Clock) -> None:
+        self.base = base
+        self.offset = 0.0
+
+    def align(self, now: float) -> None:
+        """Make `now()` read `now` at this instant (the active's program time, just received)."""
+        self.offset = now - self.base.now()
+
+    def now(self) -> float:
+        return self.base.now() + self.offset
+
+    def wall(self) -> float:
+        return self.base.wall()
+
+    def monotonic(self) -> float:
+        return self.base.monotonic()
+
+    async def sleep_until(self, deadline: float) -> None:
+        await self.base.sleep_until(deadline - self.offset)
+
+    async def run_blocking(self, function: Callable[..., T], *args: Any) -> T:
+        return await self.base.run_blocking(function, *args)
+
+    @property
+    def simulated(self) -> bool:
+        return self.base.simulated
+
+
 def _has_ready_callbacks() -> bool:
     """Whether the running asyncio loop has callbacks queued for its next turn (False if it cannot tell)."""
     ready = getattr(asyncio.get_running_loop(), "_ready", None)  # asyncio's run queue; uvloop has none

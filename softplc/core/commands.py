@@ -68,6 +68,7 @@ class Command:
     description: str = ""
     arguments: Mapping[str, str] = field(default_factory=dict)  # name → description
     audited: bool = True  # False for commands that only read (lists, details)
+    on_standby: bool = False  # an action a standby of a redundant pair carries out too (its own, e.g. a switchover)
 
 
 @dataclass(frozen=True)
@@ -92,6 +93,9 @@ class Commands:
         self._now = now
         self._commands: dict[str, Command] = {}
         self._listeners: list[CallListener] = []
+        # Why actions are refused here ('' when they are not): a standby's or fenced plant's
+        # refusal naming the active (softplc/core/plant_role.py); queries (VIEW) always run.
+        self.refusal: Callable[[], str] | None = None
 
     def register(
         self,
@@ -102,13 +106,14 @@ class Commands:
         description: str = "",
         arguments: Mapping[str, str] | None = None,
         audited: bool | None = None,
+        on_standby: bool = False,
     ) -> Callable[[], None]:
         """Register a command; returns an unregister. Names are dotted: `alarms.acknowledge`."""
         if name in self._commands:
             raise ValueError(f"command {name!r} is registered twice")
         self._commands[name] = Command(
             name, handler, permission, description, dict(arguments or {}),
-            audited=permission is not Permission.VIEW if audited is None else audited,
+            audited=permission is not Permission.VIEW if audited is None else audited, on_standby=on_standby,
         )
         return lambda: self._commands.pop(name, None)
 
@@ -140,6 +145,12 @@ class Commands:
             refusal = CommandRefused(f"role {role} may not {command.description or name}")
             self._report(origin, name, arguments, refusal, audited=command.audited)
             raise refusal
+        if command.permission is not Permission.VIEW and not command.on_standby and self.refusal is not None:
+            reason = self.refusal()
+            if reason:
+                refusal = CommandRefused(reason)
+                self._report(origin, name, arguments, refusal, audited=command.audited)
+                raise refusal
         unknown = [key for key in arguments if command.arguments and key not in command.arguments]
         if unknown:
             refusal = CommandRefused(f"{name}: unknown argument {unknown[0]!r}; it takes: {', '.join(command.arguments) or 'none'}")

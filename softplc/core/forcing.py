@@ -52,6 +52,7 @@ class Forces:
     def __init__(self) -> None:
         self._active: dict[str, Force] = {}
         self._requested: dict[str, int] = {}  # tag → changes waiting in the journal
+        self.changes = 0  # forces set or released so far (a standby's copy is refreshed when it grows)
 
     def __contains__(self, name: object) -> bool:
         return name in self._active
@@ -73,8 +74,18 @@ class Forces:
     def note_request(self, name: str) -> None:
         self._requested[name] = self._requested.get(name, 0) + 1
 
+    def forget_requests(self) -> None:
+        """The journal was discarded: no change waits any more."""
+        self._requested.clear()
+
+    def replace(self, forces: list[Force]) -> None:
+        """The forces in effect are exactly these (a standby mirroring its active)."""
+        self._active = {force.tag: force for force in forces}
+        self.changes += 1
+
     def apply(self, change: ForceChange, current: Any) -> Force | None:
         """Carry out a journaled change; returns the force it released (an unforce), else None."""
+        self.changes += 1
         left = self._requested.get(change.tag, 1) - 1
         if left:
             self._requested[change.tag] = left

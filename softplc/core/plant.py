@@ -33,11 +33,16 @@ from typing import Any, Protocol, runtime_checkable
 from softplc.core.clock import Clock
 from softplc.core.commands import Commands
 from softplc.core.events import EventBus
+from softplc.core.plant_role import RoleHolder
 from softplc.core.tagdb import TagDatabase
 
 
 class AdapterError(RuntimeError):
     """An adapter could not start (port in use, bad certificate...); the message says why."""
+
+
+class StateRefused(ValueError):
+    """A replicated state or journal entry that is malformed or cannot be applied; nothing of it was applied."""
 
 
 class ProgramView(Protocol):
@@ -76,6 +81,48 @@ class ThreadGate(Protocol):
         ...
 
 
+class StateReplication(Protocol):
+    """A plant's state at cycle boundaries as plain data, for a redundant pair (softplc/engine/replication_wire.py)."""
+
+    @property
+    def sequence(self) -> int: ...  # of the last state captured (active) or applied (standby)
+
+    @property
+    def held(self) -> int: ...  # the active's journal entries a standby holds, not yet applied there
+
+    def capture(self, task: TaskView | None) -> list[Any]:
+        """What changed since the previous capture, at the end of `task`'s cycle (call from `after_cycle`; None: a heartbeat)."""
+        ...
+
+    def capture_full(self) -> list[Any]:
+        """The whole state: every tag but `_sys.`, the forces, every program's state, every part."""
+        ...
+
+    def apply(self, state: Any) -> None:
+        """Make this (standby) plant's state the captured one; raises StateRefused, applying nothing."""
+        ...
+
+    def on_journal(self, callback: Callable[[list[Any]], None]) -> Callable[[], None]:
+        """Call `callback(message)` for every batch of writes journaled here, before the writer is answered."""
+        ...
+
+    def pending_journal(self) -> list[Any]:
+        """The writes journaled and not yet applied, as one journal message (send it after a full state)."""
+        ...
+
+    def hold(self, message: Any) -> None:
+        """Keep the active's journal entries until a state says they were applied; raises StateRefused."""
+        ...
+
+    def take_over(self) -> int:
+        """This standby becomes active: resume the active's write journal; returns the writes resumed."""
+        ...
+
+    def add_part(self, name: str, capture: Callable[[bool], Any], apply: Callable[[Any], None]) -> Callable[[], None]:
+        """Replicate an adapter's state too: `capture(full)` (None: unchanged), `apply(state)`; returns an undo."""
+        ...
+
+
 @runtime_checkable
 class Plant(Protocol):
     """What an adapter may use of a running plant (see the module docstring)."""
@@ -86,6 +133,7 @@ class Plant(Protocol):
     commands: Commands  # register and call commands and queries with an origin
     events: EventBus  # what happened (alarm transitions...)
     state_dir: Path  # where adapters keep durable state (stores, certificates, tokens)
+    role: RoleHolder  # ACTIVE alone; in a redundant pair set by its adapter (softplc/core/plant_role.py)
 
     @property
     def tasks(self) -> Sequence[TaskView]: ...
@@ -98,6 +146,9 @@ class Plant(Protocol):
 
     @property
     def gate(self) -> ThreadGate | None: ...  # None on a simulated clock or without tasks
+
+    @property
+    def replication(self) -> StateReplication: ...  # the plant's state for a standby (made on first use)
 
     def spawn(self, coroutine: Coroutine[Any, Any, Any], name: str) -> asyncio.Task[Any]:
         """Run a background coroutine for the plant's lifetime; its crash is logged, not lost."""

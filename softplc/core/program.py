@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from softplc.core.clock import Clock
+from softplc.core.plant_role import RoleHolder
 from softplc.util.durations import parse_duration
 
 _MISSING: Any = object()
@@ -108,6 +109,7 @@ class ProgramContext:
     name: str
     clock: Clock
     params: dict[str, Any]
+    plant_role: RoleHolder | None = None  # the plant's role in a redundant pair (softplc/core/plant_role.py)
 
 
 def program_log(name: str) -> logging.Logger:
@@ -142,6 +144,7 @@ class Program:
         self.name = context.name
         self.clock = context.clock
         self.log = program_log(context.name)
+        self.plant_role = context.plant_role
         for name, param in self.params.items():
             setattr(self, name, context.params.get(name, param.default))
 
@@ -149,6 +152,12 @@ class Program:
     def now(self) -> float:
         """Current runtime time in seconds (simulated time under `--sim`)."""
         return self.clock.now()
+
+    @property
+    def epoch(self) -> int:
+        """The epoch of the plant's active term (0 for a runtime alone): stamp every command sent to a remote
+        device with it, so the device can ignore an older active of a redundant pair (docs/redundancy.md)."""
+        return self.plant_role.epoch if self.plant_role is not None else 0
 
     def setup(self) -> None:
         """Called once before the first scan, and again after a restart."""
@@ -171,7 +180,7 @@ class Program:
         return carry_attributes(old, self)
 
 
-_RUNTIME_ATTRIBUTES = frozenset({"name", "clock", "log", "first_scan", "restarted"})
+_RUNTIME_ATTRIBUTES = frozenset({"name", "clock", "log", "first_scan", "restarted", "plant_role"})
 
 
 def carry_attributes(old: Program, new: Program) -> list[str]:

@@ -12,6 +12,10 @@ this API:
   the one place an audit trail or a write log listens, so no adapter keeps its own;
 - force and unforce tags (`db.force`, `db.unforce`, `db.forces`; see `softplc/core/forcing.py`).
 
+While the plant is not the active one of a redundant pair (`softplc/core/plant_role.py`), the
+door is shut: client writes and forces are refused with rule NOT_ACTIVE, and internal writes
+are dropped (the active's image is mirrored here instead, `softplc/engine/replication.py`).
+
 Programs' outputs are committed by the scan engine with `db.commit(...)`.
 """
 
@@ -24,8 +28,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from softplc.core.datatypes import TypeMismatch
-from softplc.core.forcing import ForceChange, Forces
+from softplc.core.forcing import Force, ForceChange, Forces
 from softplc.core.origin import Origin, origin_of
+from softplc.core.plant_role import RoleHolder
 from softplc.core.roles import Role
 from softplc.core.tags import Access, Quality, Tag, TagDef
 
@@ -44,6 +49,7 @@ class Rule(enum.Enum):
     ACCESS_DENIED = "access denied"  # the writer's role may not write at all (a viewer)
     INVALID_REQUEST = "invalid request"  # refused by the protocol before any tag rule (e.g. a quality, an index range)
     FORCED = "forced"  # the tag is forced by an engineer: unforce it first
+    NOT_ACTIVE = "not active"  # this runtime is the standby (or fenced) of a redundant pair: write to the active
 
 
 class WriteRejected(Exception):
@@ -88,6 +94,7 @@ class WriteEvent:
 
 ChangeCallback = Callable[[Sequence[Tag]], None]
 WriteCallback = Callable[[Sequence[WriteEvent]], None]
+JournalCallback = Callable[[int, Sequence["Write | ForceChange"]], None]
 
 
 class TagDatabase:
@@ -104,7 +111,13 @@ class TagDatabase:
         self._journal: list[Write | ForceChange] = []
         self._callbacks: list[ChangeCallback] = []
         self._write_callbacks: list[WriteCallback] = []
+        self._journal_callbacks: list[JournalCallback] = []
         self.forces = Forces()
+        # Positions in the stream of every journal entry ever made: how many were journaled, and
+        # how many applied (a standby resumes the active's journal from the applied position).
+        self.journaled_position = 0
+        self.applied_position = 0
+        self.role: RoleHolder | None = None  # set by the runtime: writes are refused unless active
 
     # -- reading --------------------------------------------------------------------------
 
@@ -149,6 +162,7 @@ class TagDatabase:
             raise WriteRejected(name, Rule.UNKNOWN_TAG, "no such tag")
         definition = tag.definition
         if role is not None:
+            self._check_door(name)
             self._check_access(definition, role)
             if name in self.forces:
                 raise WriteRejected(name, Rule.FORCED, "the tag is forced; unforce it first")
@@ -180,6 +194,13 @@ class TagDatabase:
             raise WriteRejected(name, Rule.UNKNOWN_TAG, "no such tag")
         self._check_access(tag.definition, role)
 
+    def _check_door(self, name: str) -> None:
+        """Raise WriteRejected(NOT_ACTIVE) unless this plant is the active one (or alone)."""
+        if self.role is not None:
+            refusal = self.role.refusal()
+            if refusal:
+                raise WriteRejected(name, Rule.NOT_ACTIVE, refusal)
+
     @staticmethod
     def _check_access(definition: TagDef, role: Role) -> None:
         if definition.runtime_only:
@@ -209,6 +230,10 @@ class TagDatabase:
         origin = origin_of(origin)
         items = list(items)
         role = origin.role
+        if role is None and self.role is not None and not self.role.is_active():
+            # A driver's write on a standby: the active's image is what counts here.
+            refusal = self.role.refusal()
+            return [WriteRejected(name, Rule.NOT_ACTIVE, refusal) for name, _ in items]
         accepted: list[Write] = []
         results: list[WriteRejected | None] = []
         for name, value in items:
@@ -235,7 +260,7 @@ class TagDatabase:
                 else:
                     events.append(WriteEvent(now, origin, name, old, value, result.rule, result.detail))
             self._report(events)
-        self._journal.extend(accepted)
+        self._add_to_journal(accepted)
         return results
 
     def refused(self, origin: Origin | str, name: str, value: Any, rule: Rule, detail: str) -> WriteRejected:
@@ -253,10 +278,12 @@ class TagDatabase:
         (a driver's new reading in the same cycle) stands.
         """
         origin = origin_of(origin)
+        if self.role is not None and not self.role.is_active():
+            return
         for name in names:
             if name not in self._tags:
                 raise KeyError(name)
-            self._journal.append(Write(name, KEEP_VALUE, origin, quality))
+        self._add_to_journal([Write(name, KEEP_VALUE, origin, quality) for name in names])
 
     def force(self, name: str, value: Any, origin: Origin | str) -> Any:
         """Force a tag to `value` from the next cycle boundary on; returns the coerced value.
@@ -270,22 +297,100 @@ class TagDatabase:
             raise WriteRejected(name, Rule.UNKNOWN_TAG, "no such tag")
         if tag.definition.runtime_only:
             raise WriteRejected(name, Rule.READ_ONLY, "a diagnostic tag, written by the runtime only, cannot be forced")
+        self._check_door(name)
         coerced = self.validate(name, value, role=None)
         self.forces.note_request(name)
-        self._journal.append(ForceChange(name, True, coerced, origin_of(origin), self._now()))
+        self._add_to_journal([ForceChange(name, True, coerced, origin_of(origin), self._now())])
         return coerced
 
     def unforce(self, name: str, *, restore: bool = False) -> bool:
         """Release a forced tag at the next cycle boundary (`restore`: back to its value before the force)."""
         if name not in self.forces and not self.forces.requested(name):
             return False
+        self._check_door(name)
         self.forces.note_request(name)
-        self._journal.append(ForceChange(name, False, restore=restore))
+        self._add_to_journal([ForceChange(name, False, restore=restore)])
         return True
 
     @property
     def journal_length(self) -> int:
         return len(self._journal)
+
+    def pending(self) -> list[Write | ForceChange]:
+        """The entries waiting for the next cycle boundary, from `applied_position` on (a standby that connects needs them)."""
+        return list(self._journal)
+
+    def _add_to_journal(self, entries: list[Write | ForceChange]) -> None:
+        if not entries:
+            return
+        first = self.journaled_position
+        self._journal.extend(entries)
+        self.journaled_position = first + len(entries)
+        for callback in self._journal_callbacks:
+            try:
+                callback(first, entries)
+            except Exception:  # a broken listener must never refuse or lose a write
+                log.exception("journal listener %r failed", callback)
+
+    def on_journal(self, callback: JournalCallback) -> Callable[[], None]:
+        """Call `callback(position, entries)` for every batch entering the write journal (a standby's copy); returns an undo.
+
+        `position` is the stream position of the first entry. Called synchronously, before the
+        writer is answered: an entry a listener has sent on is never acknowledged and then lost.
+        """
+        self._journal_callbacks.append(callback)
+        return lambda: self._journal_callbacks.remove(callback) if callback in self._journal_callbacks else None
+
+    def resume_journal(self, position: int, entries: Sequence[Write | ForceChange]) -> None:
+        """Continue the journal of the active this plant mirrored: `entries` (not yet applied there) from `position` on."""
+        self.discard_journal()
+        self.applied_position = self.journaled_position = position
+        for entry in entries:
+            if type(entry) is ForceChange:
+                self.forces.note_request(entry.tag)
+        self._add_to_journal(list(entries))
+
+    def discard_journal(self) -> None:
+        """Forget the writes waiting for a cycle (a plant that became a standby: the active's image wins)."""
+        self._journal = []
+        self.forces.forget_requests()
+
+    # -- mirroring (a standby of a redundant pair) -------------------------------------------
+
+    def mirror(self, values: Iterable[tuple[str, Any, Quality, float]]) -> list[Tag]:
+        """Set tags to the active's (value, quality, timestamp) as they are; return the changed tags.
+
+        Only for a standby copying the active's image: nothing is validated (the active did it) and
+        forces are not consulted (the active's forced values come with the image).
+        """
+        changed = []
+        tags = self._tags
+        for name, value, quality, timestamp in values:
+            tag = tags[name]
+            if tag.value != value or tag.quality is not quality or type(tag.value) is not type(value):
+                tag.value = value
+                tag.quality = quality
+                tag.timestamp = timestamp
+                changed.append(tag)
+        self._notify(changed)
+        return changed
+
+    def mirror_forces(self, forces: Sequence[Force]) -> None:
+        """Make the forces in effect exactly `forces` (the active's), marking the tags."""
+        wanted = {force.tag: force for force in forces if force.tag in self._tags}
+        changed = []
+        for force in self.forces.active():
+            if force.tag not in wanted:
+                tag = self._tags[force.tag]
+                tag.forced = False
+                changed.append(tag)
+        self.forces.replace(list(wanted.values()))
+        for name in wanted:
+            tag = self._tags[name]
+            if not tag.forced:
+                tag.forced = True
+                changed.append(tag)
+        self._notify(changed)
 
     def apply_journal(self) -> int:
         """Apply forces, then every journaled write in arrival order; return how many were applied.
@@ -295,6 +400,7 @@ class TagDatabase:
         if not self._journal:
             return 0
         journal, self._journal = self._journal, []
+        self.applied_position += len(journal)
         now = self._now()
         changed: dict[str, Tag] = {}
         forces = self.forces

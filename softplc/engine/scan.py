@@ -8,6 +8,10 @@ A cycle of a task:
 
 Releases are at `origin + k * interval` on the runtime clock. A cycle that ends after its next
 release skips the missed releases and counts them as overruns; it never bursts to catch up.
+
+A plant that is not the active one of a redundant pair (`softplc/core/plant_role.py`) runs no
+cycle at all: each release passes without a scan, without applying the journal and without
+committing anything, until it is active again; the role is asked at every release.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from softplc.core.clock import Clock
+from softplc.core.plant_role import RoleHolder
 from softplc.engine.program_instance import NEVER, ProgramInstance, ProgramState, RestartPolicy
 from softplc.core.stats import TimingSeries
 from softplc.core.tagdb import TagDatabase
@@ -124,6 +129,12 @@ class Task:
         self.running_program = ""
         return [tag.name for tag in db.commit(outputs)]
 
+    def pass_release(self, now: float) -> None:
+        """Let the due release go by without a cycle (a standby): the next one on the grid after `now`."""
+        self._k = max(self._k + 1, math.floor((now - self._origin) / self.interval) + 1)
+        self.next_release = self._origin + self._k * self.interval
+        self._last_start = None  # the next cycle's cycle time would span the pause
+
     def record(self, release: float, start: float, end: float) -> None:
         """Account for a cycle and compute the next release (skipping missed ones)."""
         stats = self.stats
@@ -164,6 +175,12 @@ class ScanEngine:
         self.current: CurrentScan | None = None
         self._after_cycle: list[Callable[[Task], None]] = []
         self._stopping = False
+        self.role: RoleHolder | None = None  # None: alone, always active
+        self.passed = 0  # releases passed without a cycle (not active)
+
+    def active(self) -> bool:
+        """Whether cycles run now (alone, or the active of a redundant pair)."""
+        return self.role is None or self.role.is_active()
 
     def after_cycle(self, callback: Callable[[Task], None]) -> Callable[[], None]:
         """Call `callback(task)` after every cycle (e.g. to evaluate a stop condition); returns an undo."""
@@ -181,6 +198,8 @@ class ScanEngine:
 
     def commit_reactions(self) -> list[str]:
         """Commit the fault reactions due outside a cycle (a setup() at start-up or reset, a stall, a stop)."""
+        if not self.active():
+            return []  # a standby drives nothing: the active's outputs are mirrored here
         values: dict[str, Any] = {}
         for task in self.tasks:
             for instance in task.programs:
@@ -207,7 +226,8 @@ class ScanEngine:
             task.schedule_from(origin)
         if not self.tasks:
             while not self._stopping:
-                self.db.apply_journal()
+                if self.active():
+                    self.db.apply_journal()
                 await clock.sleep(0.01)
             return
         try:
@@ -220,6 +240,13 @@ class ScanEngine:
                 # Of the tasks due (several after a long scan), the highest priority goes first,
                 # even if a lower-priority task has waited longer.
                 task = min(due, key=lambda t: (t.priority, t.next_release))
+                if self.role is not None and not self.role.is_active():
+                    for passed in due:
+                        passed.pass_release(now)
+                    self.passed += len(due)
+                    clock.cycle_done()
+                    await asyncio.sleep(0)
+                    continue
                 self.cycle(task, task.next_release)
                 now = clock.now()
                 if not any(t.next_release <= now for t in self.tasks):

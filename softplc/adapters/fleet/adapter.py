@@ -76,8 +76,16 @@ class TagIO:
         self._names = {name: f"{robot_id}_{name}" for name in (*PUBLISHED_TAGS, "status")}
         self._last: dict[str, Any] = {}
         self.source = Origin(f"fleet:{robot_id}", role=None)
+        self.driver: RobotDriver | None = None  # set once made: a standby keeps it on the active's pose
 
     def command(self) -> Command:
+        # The standby of a redundant pair (docs/redundancy.md) drives nothing: its simulated robot
+        # stands where the active's is (the mirrored tags), so a takeover carries on from there.
+        role = self.db.role
+        if role is not None and not role.is_active() and self.driver is not None:
+            db = self.db
+            self.driver.pose = Pose(float(db.value(self._names["xpos"])), float(db.value(self._names["ypos"])),
+                                    float(db.value(self._names["heading"])))
         return Command(self._goal_x.value, self._goal_y.value, bool(self._status.value))
 
     def peers(self) -> PeerView:
@@ -94,7 +102,8 @@ class TagIO:
         self._last.update(values)
         if report.status is not None:
             items.append((names["status"], report.status))
-        if items:
+        role = self.db.role
+        if items and (role is None or role.is_active()):  # a standby's writes would be refused: it mirrors the active's
             for rejected in self.db.submit(items, self.source):
                 if rejected is not None:
                     log.warning("robot %s: %s", self.id, rejected)
@@ -190,7 +199,9 @@ class FleetAdapter:
             pose = Pose(float(db.value(f"{robot.id}_xpos")), float(db.value(f"{robot.id}_ypos")), float(db.value(f"{robot.id}_heading")))
             driver = RobotDriver(robot, self.floor, limits[robot.id], self.driver_settings, cycle=self.cycle, pose=pose)
             record = self.trajectories.setdefault(robot.id, []) if self.record else None
-            loop = ControlLoop(driver, TagIO(db, robot.id, peers), plant.clock, self.cycle,
+            io = TagIO(db, robot.id, peers)
+            io.driver = driver
+            loop = ControlLoop(driver, io, plant.clock, self.cycle,
                                phase=(index % PHASES) * self.cycle / PHASES, record=record, planning=planning)
             self.drivers[robot.id] = driver
             self.loops[robot.id] = loop

@@ -215,6 +215,9 @@ class HistoryRecorder:
     # -- internals ------------------------------------------------------------------------
 
     def _changed(self, tags: Sequence[Tag]) -> None:
+        role = self._plant.tags.role if self._plant is not None else None
+        if role is not None and not role.is_active():
+            return  # the standby of a redundant pair mirrors the active's values: the active records them (docs/redundancy.md)
         filters = self.filters
         rows: list[Row] = []
         for tag in tags:

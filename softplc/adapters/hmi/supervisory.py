@@ -22,6 +22,7 @@ from softplc.adapters.hmi.shell import Page, Shell
 log = logging.getLogger(__name__)
 
 ALARM_BANNER = "/static/js/banners/alarms.js"
+PAIR_BANNER = "/static/js/banners/pair.js"  # a member of a redundant pair (docs/redundancy.md)
 UPLOT = Path("node_modules") / "uplot" / "dist" / "uPlot.esm.js"
 
 
@@ -43,6 +44,8 @@ def add_supervisory(shell: Shell, commands: Commands, assets: Path) -> None:
         shell.add_page(page)
     if "alarms.summary" in commands:
         shell.banners.insert(0, ALARM_BANNER)  # first under the header: what is wrong now
+    if "redundancy.status" in commands:
+        shell.banners.insert(0, PAIR_BANNER)  # which runtime of the pair this is, and where the active is
     if "history.plot" in commands and not (assets / UPLOT).is_file():
         log.warning("HMI: the trend library uPlot is missing (%s): the trend page cannot draw; run scripts/bootstrap.sh "
                     "(npm ci in hmi/), or reinstall softplc from a clone where it ran", assets / UPLOT)

@@ -56,6 +56,9 @@ EXCEPTION_FOR_RULE: dict[Rule, ExcCodes] = {
     # Forced by an engineer: not writable until unforced, like a read-only tag. Not 04 (the server
     # did not fail) nor 06 "busy" (the client would retry a write that cannot succeed).
     Rule.FORCED: ExcCodes.ILLEGAL_ADDRESS,
+    # The standby of a redundant pair: "busy, retry later" — the client should write to the
+    # active (docs/redundancy.md); Modbus has no way to name it.
+    Rule.NOT_ACTIVE: ExcCodes.DEVICE_BUSY,
 }
 # The read that pymodbus does after FC5/FC6 builds the echo of the request: leave the
 # just-written words in place instead of refreshing them from the (not yet applied) tag.

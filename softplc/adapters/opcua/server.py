@@ -39,6 +39,7 @@ from softplc.adapters.opcua.history import MAX_NODES_PER_HISTORY_READ, HistoryPr
 from softplc.adapters.opcua.history_capabilities import advertise_history
 from softplc.adapters.opcua.history_provider import CommandHistory  # the historian's commands, when it runs
 from softplc.adapters.opcua.publisher import Publisher
+from softplc.adapters.opcua.redundancy import ServerRedundancy, redundancy_info  # a redundant pair's ServiceLevel
 from softplc.adapters.opcua.roles import RolePermissions
 from softplc.adapters.opcua.scheduling import ScanGuard
 from softplc.security.certificates import ClientCertificateValidator, Pki, SecuredChannels
@@ -79,6 +80,8 @@ class OpcUaServer:
         self.conditions: AlarmConditions | None = None
         self.commands_door: CommandsDoor | None = None
         self.server_clock: ServerStatusClock | None = None
+        self.redundancy: ServerRedundancy | None = None
+        self._redundancy: dict[str, Any] | None = None
 
     @property
     def namespace_uri(self) -> str:
@@ -94,6 +97,11 @@ class OpcUaServer:
         from softplc.core.plant import AdapterError
 
         started = time.perf_counter()
+        self._redundancy = await redundancy_info(plant)
+        if self._redundancy is not None:  # each member of a redundant pair serves under its own application URI
+            import dataclasses
+
+            self.settings = dataclasses.replace(self.settings, application_uri=str(self._redundancy["application_uri"]))
         settings = self.settings
         try:
             self.users = UserStore(settings.users_path(plant.state_dir))
@@ -180,8 +188,12 @@ class OpcUaServer:
         # Alarms & Conditions (softplc/adapters/opcua/conditions.py), Objects/Commands (commands.py)
         self.conditions = await AlarmConditions.install(server, plant, self.namespace_index)
         self.commands_door = await CommandsDoor.install(server, plant.commands, self.namespace_index)
+        if self._redundancy is not None:
+            self.redundancy = await ServerRedundancy.install(server, plant, self._redundancy)
 
     async def stop(self) -> None:
+        if self.redundancy is not None:
+            self.redundancy.stop()
         if self.conditions is not None:
             await self.conditions.stop()
         if self.server_clock is not None:

@@ -73,6 +73,9 @@ _RULE_CODES = {
     Rule.ACCESS_DENIED: ua.StatusCodes.BadUserAccessDenied,
     Rule.FORCED: ua.StatusCodes.BadLocked,  # "locked by a different application": an engineer's force
     Rule.INVALID_REQUEST: ua.StatusCodes.BadInvalidArgument,  # e.g. an item of an all-or-nothing batch
+    # The standby of a redundant pair; ServerRedundancy (ServiceLevel, ServerUriArray) and
+    # _sys.redundancy.active tell the client where the active is (docs/redundancy.md).
+    Rule.NOT_ACTIVE: ua.StatusCodes.BadInvalidState,
 }
 _CODE_RULES = {
     ua.StatusCodes.BadTypeMismatch: Rule.TYPE_MISMATCH,

@@ -10,6 +10,12 @@ publishes to the robot's read-only tags. When the runtime goes away the robot st
 is, and the agent reconnects with exponential backoff; its driver (pose, path) survives the
 reconnection.
 
+A redundant pair of runtimes (docs/redundancy.md): `--endpoint URL1,URL2`. The agent connects
+to the member whose ServiceLevel says it is active, registers there (a standby refuses the
+registration) and follows the pair's epoch (`_sys.redundancy.epoch`): it obeys goals only from a
+member that is ACTIVE with the highest epoch it has seen, and leaves a member that stops being
+active to look for the new one. A fenced or older active's goals are ignored: the robot stops.
+
 Some failures are not worth retrying and end `run()` with an `AgentError`: the runtime refused
 the registration (it drives that robot itself, or has no such robot), or refused the login
 `max_login_failures` times in a row (each refusal is logged as an error).
@@ -72,11 +78,33 @@ class Credentials:
     security: str = "None"  # None | Basic256Sha256_Sign | Basic256Sha256_SignAndEncrypt
 
 
+EPOCH, ROLE = "_sys.redundancy.epoch", "_sys.redundancy.role"
+
+
+class Epochs:
+    """The highest epoch of a redundant pair's active this agent has seen (0 alone), across sessions."""
+
+    def __init__(self) -> None:
+        self.highest = 0
+
+    def obeys(self, role: Any, epoch: Any) -> bool:
+        """Whether goals from a member with this role and epoch are obeyed (and the highest epoch noted)."""
+        if role is None and epoch is None:
+            return True  # a runtime alone
+        if role != "ACTIVE" or not isinstance(epoch, int) or epoch < self.highest:
+            return False
+        self.highest = epoch
+        return True
+
+
 class SubscriptionIO:
     """The driver's inputs from OPC UA subscriptions, its output as one report write per cycle."""
 
-    def __init__(self, client: Client, namespace: int, robot_id: str, ids: list[str], first_event: int, session: str = "") -> None:
+    def __init__(self, client: Client, namespace: int, robot_id: str, ids: list[str], first_event: int, session: str = "",
+                 epochs: Epochs | None = None, paired: bool = False) -> None:
         self.client = client
+        self.epochs = epochs or Epochs()
+        self.paired = paired  # the runtime is a member of a redundant pair: goals need its role and epoch
         self.id = robot_id
         self.ids = ids
         self.values: dict[str, Any] = {}
@@ -100,8 +128,16 @@ class SubscriptionIO:
     def status_change_notification(self, status: Any) -> None:
         pass  # the session's end is noticed by the next write or the connection watchdog
 
+    def obeyed(self) -> bool:
+        """Whether this member's goals are obeyed now (alone: always; in a pair: the newest active only)."""
+        if not self.paired:
+            return True
+        return self.epochs.obeys(self.values.get(ROLE), self.values.get(EPOCH))
+
     def command(self) -> Command | None:
         values = self.values
+        if not self.obeyed():
+            return None  # a standby's, a fenced or an older active's goals: the robot does not move for them
         try:
             return Command(float(values[f"{self.id}_xgoal"]), float(values[f"{self.id}_ygoal"]), bool(values[f"{self.id}_status"]))
         except (KeyError, TypeError, ValueError):
@@ -142,7 +178,9 @@ class RobotAgent:
             self.spec = robots[robot_id]
         except KeyError:
             raise KeyError(unknown_id_message("robot", robot_id, robots.ids)) from None
-        self.endpoint = endpoint
+        self.endpoints = [part.strip() for part in endpoint.split(",") if part.strip()] or [endpoint]
+        self.endpoint = self.endpoints[0]
+        self.epochs = Epochs()
         self.robots = robots
         self.credentials = credentials or Credentials()
         self.namespace = namespace
@@ -190,14 +228,16 @@ class RobotAgent:
             backoff = min(self.max_backoff, backoff * 2)
 
     async def _session(self) -> None:
-        client = await self._client()
+        client = await self._active_client()
         async with client:
             namespace = await client.get_namespace_index(self.namespace)
             robot_id = self.spec.id
             session = uuid.uuid4().hex[:12]
-            io = SubscriptionIO(client, namespace, robot_id, self.robots.ids, self.driver.status_seq + 1, session)
+            paired = await _has_node(client, ua.NodeId(EPOCH, namespace))
+            io = SubscriptionIO(client, namespace, robot_id, self.robots.ids, self.driver.status_seq + 1, session, self.epochs, paired)
             names = [f"{robot_id}_{tag}" for tag in ("xgoal", "ygoal", "status", "agent")]
             names += [f"{other}_{tag}" for other in self.robots.ids for tag in PEER_TAGS]
+            names += [EPOCH, ROLE] if paired else []
             subscription = await client.create_subscription(50, io)
             await subscription.subscribe_data_change([client.get_node(ua.NodeId(name, namespace)) for name in names], queuesize=1)
             await self._register(client, namespace, io)
@@ -205,7 +245,7 @@ class RobotAgent:
             self.connected.set()
             log.info("robot %s: connected to %s, registered and accepted", robot_id, self.endpoint)
             loop = ControlLoop(self.driver, io, self.clock, self.cycle)
-            watchdog = asyncio.ensure_future(self._watch(client))
+            watchdog = asyncio.ensure_future(self._watch(client, io))
             driving = asyncio.ensure_future(loop.run())
             try:
                 done, _ = await asyncio.wait({watchdog, driving}, return_when=asyncio.FIRST_COMPLETED)
@@ -230,6 +270,8 @@ class RobotAgent:
             if error.code in (ua.StatusCodes.BadNodeIdUnknown, ua.StatusCodes.BadNodeIdInvalid):
                 raise AgentError(f"the runtime at {self.endpoint} has no tag {robot_id}_agent: robot {robot_id} is not in its "
                                  "robots.yaml, or its robot template lacks the remote-robot tags (docs/robots.md)") from None
+            if error.code == ua.StatusCodes.BadInvalidState:  # the standby of a redundant pair: find the active
+                raise Unanswered(f"{self.endpoint} is not the active member of its pair") from None
             if error.code == ua.StatusCodes.BadUserAccessDenied:
                 who = f"user {self.credentials.user!r}" if self.credentials.user else "an anonymous session"
                 raise AgentError(f"{who} may not write {robot_id}_agent at {self.endpoint}: a robot agent logs in as a user "
@@ -243,15 +285,41 @@ class RobotAgent:
         if not io.answer.accepted:
             raise AgentError(f"the runtime at {self.endpoint} refused robot {robot_id}: {io.answer.reason}")
 
-    async def _watch(self, client: Client) -> None:
-        """End the session when the connection dies even if no write notices it."""
+    async def _watch(self, client: Client, io: SubscriptionIO) -> None:
+        """End the session when the connection dies even if no write notices it, or its member stops being the active."""
         while True:
-            await asyncio.sleep(1.0)
+            await asyncio.sleep(1.0 if not io.paired else 0.2)
             await client.check_connection()
+            if io.paired and ROLE in io.values and not io.obeyed():
+                raise Unanswered(f"{client.server_url.geturl()} is no longer the active of its pair "
+                                 f"({io.values.get(ROLE)}, epoch {io.values.get(EPOCH)})")
 
-    async def _client(self) -> Client:
+    async def _active_client(self) -> Client:
+        """A client of the pair's active (ServiceLevel ≥ 200), else of the first endpoint that answers (alone: the one)."""
+        if len(self.endpoints) == 1:
+            self.endpoint = self.endpoints[0]
+            return await self._client()
+        fallback: Client | None = None
+        for endpoint in self.endpoints:
+            client = await self._client(endpoint)
+            try:
+                await client.connect()
+                level = await client.get_node(ua.NodeId(ua.ObjectIds.Server_ServiceLevel)).read_value()
+            except Exception:  # that member is down: try the other
+                client.disconnect_socket()
+                continue
+            await client.disconnect()
+            if isinstance(level, int) and level >= 200:
+                self.endpoint = endpoint
+                return client
+            fallback = fallback or client
+        if fallback is None:
+            raise ConnectionError(f"no member of the pair answers ({', '.join(self.endpoints)})")
+        raise Unanswered(f"no member of the pair is active now ({', '.join(self.endpoints)})")
+
+    async def _client(self, endpoint: str | None = None) -> Client:
         credentials = self.credentials
-        client = Client(self.endpoint, timeout=4)
+        client = Client(endpoint or self.endpoint, timeout=4)
         if credentials.user:
             client.set_user(credentials.user)
             client.set_password(credentials.password or "")
@@ -275,6 +343,15 @@ async def _secure(client: Client, credentials: Credentials, *, user_login: bool)
     if user_login:
         await client.load_client_certificate(certificate)
         await client.load_private_key(key)
+
+
+async def _has_node(client: Client, node_id: ua.NodeId) -> bool:
+    """Whether the server has this node (a redundant pair's member has `_sys.redundancy.epoch`)."""
+    try:
+        await client.get_node(node_id).read_browse_name()
+    except ua.UaStatusCodeError:
+        return False
+    return True
 
 
 def _application_uri(path: Path) -> str:

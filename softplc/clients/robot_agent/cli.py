@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from softplc.clients.login import endpoint_url
+from softplc.clients.login import endpoint_urls
 from softplc.protocols.opcua_names import DEFAULT_NAMESPACE
 from softplc.robotics.layout import DEFAULT_MAP, DEFAULT_ROBOTS
 
@@ -35,7 +35,8 @@ def add_commands(subparsers: Any) -> None:
         epilog="Example: softplc robot-agent --endpoint opc.tcp://127.0.0.1:4840/softplc/ --robot r01 "
         f"--user r01 (password from ${PASSWORD_ENV}, --password-file or --password)",
     )
-    agent.add_argument("--endpoint", required=True, metavar="URL", type=endpoint_url, help="the runtime's OPC UA endpoint, opc.tcp://HOST:PORT/PATH")
+    agent.add_argument("--endpoint", required=True, metavar="URL", type=endpoint_urls,
+                       help="the runtime's OPC UA endpoint, opc.tcp://HOST:PORT/PATH; a redundant pair's two, comma separated: the agent follows the active")
     agent.add_argument("--robot", required=True, metavar="ID", help="this robot's id in robots.yaml, e.g. r01")
     agent.add_argument("--robots", default=DEFAULT_ROBOTS, metavar="FILE", help=f"robots file (default {DEFAULT_ROBOTS})")
     agent.add_argument("--map", default=DEFAULT_MAP, metavar="FILE", help=f"map YAML (default {DEFAULT_MAP})")

@@ -127,6 +127,8 @@ def _run(command: str, args: argparse.Namespace, body: Callable[[LiveSession], A
     except LoginError as error:
         return _fail(command, str(error), error.exit_status)
 
+    args.login = login  # a body that follows a redundant pair's active opens sessions of its own
+
     async def session() -> int:
         from softplc.clients.session import NotSoftplc, UnknownTags, open_live_session
 
@@ -174,6 +176,13 @@ def cmd_write(args: argparse.Namespace) -> int:
         from softplc.core.tagdb import Rule
 
         outcomes, sent = await write_tags(live, assignments)
+        if len(args.login.endpoints) > 1 and any(o.rule is Rule.NOT_ACTIVE for o in outcomes):
+            # A redundant pair whose active changed since this command chose it: once more, on the active.
+            from softplc.clients.session import open_live_session
+
+            await asyncio.sleep(1.0)
+            async with open_live_session(args.login) as again:
+                outcomes, sent = await write_tags(again, assignments)
         for outcome in outcomes:
             print(outcome.message(), file=sys.stdout if outcome.accepted else sys.stderr)
         if not sent:
@@ -190,16 +199,53 @@ def cmd_watch(args: argparse.Namespace) -> int:
     async def body(live: LiveSession) -> int:
         from softplc.clients.tags.watch import WatchEnded, watch
 
-        tags = await live.match(args.patterns)
-        await live.read(tags)  # exact names come back unbrowsed: an unknown one is named here (UnknownTags)
+        follow = len(args.login.endpoints) > 1  # a redundant pair: follow its active
+        opened: list[LiveSession] = []
+        await live.read(await live.match(args.patterns))  # exact names come back unbrowsed: an unknown one is named here
         try:
-            reason = await watch(live, tags, sys.stdout, endpoint=live.client.server_url.geturl(), interval_ms=args.interval)
-        except WatchEnded as ended:
-            return _fail("watch", str(ended), EXIT_NO_CONNECTION)
-        print(f"softplc watch: {reason}", file=sys.stderr)
-        return EXIT_OK
+            while True:
+                tags = await live.match(args.patterns)
+                try:
+                    reason = await watch(live, tags, sys.stdout, endpoint=live.client.server_url.geturl(), interval_ms=args.interval,
+                                         follow=follow)
+                except WatchEnded as ended:
+                    if not follow:
+                        return _fail("watch", str(ended), EXIT_NO_CONNECTION)
+                    print(f"softplc watch: {live.client.server_url.geturl()}: {str(ended).removeprefix('the server went away ')}; "
+                          "following the active", file=sys.stderr)
+                    live = await _the_active(args.login, FOLLOW_TIMEOUT)
+                    opened.append(live)
+                    continue
+                print(f"softplc watch: {reason}", file=sys.stderr)
+                return EXIT_OK
+        finally:
+            for session in opened:
+                session.client.disconnect_socket()
 
     return _run("watch", args, body)
+
+
+FOLLOW_TIMEOUT = 30.0  # s `watch` looks for a redundant pair's new active before it gives up
+
+
+async def _the_active(login: Any, timeout: float) -> LiveSession:
+    """A session on the pair's active (ServiceLevel ≥ 200), looked for until `timeout`; raises WatchEnded."""
+    from softplc.clients.login import SERVICE_LEVEL_HEALTHY, connect, service_level
+    from softplc.clients.session import LiveSession
+    from softplc.clients.tags.watch import WatchEnded
+
+    deadline = asyncio.get_running_loop().time() + timeout
+    while True:
+        try:
+            client = await connect(login)
+            if await service_level(client) >= SERVICE_LEVEL_HEALTHY:
+                return await LiveSession.open(client, login.namespace)
+            client.disconnect_socket()
+        except LoginError:
+            pass
+        if asyncio.get_running_loop().time() > deadline:
+            raise WatchEnded(f"no active member of {login.endpoint} for {timeout:g} s")
+        await asyncio.sleep(0.3)
 
 
 def cmd_forces(args: argparse.Namespace) -> int:

@@ -21,6 +21,8 @@ from asyncua import Client, ua
 from softplc.clients.session import LiveSession, Reading
 from softplc.clients.tags.table import READING_HEADER, reading_row, table_lines
 
+SERVICE_LEVEL = ua.NodeId(ua.ObjectIds.Server_ServiceLevel)
+HEALTHY = 200  # a redundant pair's active serves ServiceLevel 200-255
 MAX_REDRAWS = 10  # per second: a terminal cannot show more, and a fast task must not flood it
 CURSOR_UP = "\x1b[{}A"
 CLEAR_LINE_END = "\x1b[K"
@@ -65,6 +67,10 @@ class _Subscriber:
         self.on_change: Callable[[Reading], None] | None = None
 
     def datachange_notification(self, node: Any, value: Any, data: Any) -> None:
+        if node.nodeid == SERVICE_LEVEL:  # following the active of a redundant pair
+            if isinstance(value, int) and value < HEALTHY:
+                self.lost(f"it is no longer the active one (ServiceLevel {value})")
+            return
         reading = Reading.from_data_value(node.nodeid.Identifier, data.monitored_item.Value)
         self.table.update(reading)
         if self.on_change is not None:
@@ -76,8 +82,12 @@ class _Subscriber:
 
 
 async def watch(session: LiveSession, tags: list[str], out: TextIO, *, endpoint: str, interval_ms: float = 100.0,
-                tty: bool | None = None) -> str:
-    """Show the tags until Ctrl-C (returns why it stopped) or until the server goes away (raises WatchEnded)."""
+                tty: bool | None = None, follow: bool = False) -> str:
+    """Show the tags until Ctrl-C (returns why it stopped) or until the server goes away (raises WatchEnded).
+
+    `follow`: the server is a member of a redundant pair; it also "goes away" when it stops being
+    the active one (its ServiceLevel drops below 200), so the caller can follow the new active.
+    """
     client: Client = session.client
     tty = out.isatty() if tty is None else tty
     table = WatchTable(tags, f"softplc watch: {len(tags)} tag{'s' if len(tags) != 1 else ''} on {endpoint} — Ctrl-C to stop")
@@ -101,7 +111,8 @@ async def watch(session: LiveSession, tags: list[str], out: TextIO, *, endpoint:
         subscriber.on_change = lambda reading: _print_change(reading, out)
     try:
         subscription = await client.create_subscription(interval_ms, subscriber)
-        await subscription.subscribe_data_change([client.get_node(session.node_id(tag)) for tag in tags], queuesize=1, sampling_interval=0)
+        nodes = [client.get_node(session.node_id(tag)) for tag in tags] + ([client.get_node(SERVICE_LEVEL)] if follow else [])
+        await subscription.subscribe_data_change(nodes, queuesize=1, sampling_interval=0)
         drawn = 0
         while not done.is_set():
             await _first(changed, done)

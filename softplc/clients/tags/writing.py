@@ -28,6 +28,7 @@ _CODE_RULES = {
     ua.StatusCodes.BadOutOfRange: Rule.OUT_OF_RANGE,
     ua.StatusCodes.BadUserAccessDenied: Rule.ACCESS_DENIED,
     ua.StatusCodes.BadLocked: Rule.FORCED,
+    ua.StatusCodes.BadInvalidState: Rule.NOT_ACTIVE,
 }
 # Which role makes the runtime's validation give the rule's message (the rule itself is the server's).
 _ROLE_FOR_RULE = {Rule.READ_ONLY: Role.OPERATOR, Rule.ACCESS_DENIED: Role.VIEWER, Rule.FORCED: Role.ENGINEER}
@@ -104,9 +105,24 @@ async def write_tags(session: LiveSession, assignments: list[Assignment]) -> tup
             continue
         # A forced tag refuses client writes; the server shows the force as GoodLocalOverride.
         rule = Rule.FORCED if old.forced else _CODE_RULES.get(status.value, Rule.INVALID_REQUEST)
-        detail = runtime_detail(infos[assignment.tag], value, rule) or _status_text(status)
+        if rule is Rule.NOT_ACTIVE:
+            detail = await standby_detail(session)
+        else:
+            detail = runtime_detail(infos[assignment.tag], value, rule) or _status_text(status)
         outcomes.append(WriteOutcome(assignment.tag, value, old.value, rule, detail, status.name))
     return outcomes, True
+
+
+async def standby_detail(session: LiveSession) -> str:
+    """Why a redundant pair's member refused a write, naming the active (from its `_sys.redundancy.` tags)."""
+    try:
+        member, active, endpoint = (reading.value for reading in await session.read(
+            ["_sys.redundancy.member", "_sys.redundancy.active", "_sys.redundancy.active_opcua"]))
+    except Exception:  # not a member of a pair, or it went away
+        return "this runtime is not the active one of its redundant pair: write to the active"
+    if not active:
+        return f"this runtime ({member}) is not active and no active is known now: try again shortly"
+    return f"this runtime ({member}) is the standby of its redundant pair: write to the active, {active}" + (f" ({endpoint})" if endpoint else "")
 
 
 def runtime_detail(info: TagInfo, value: Any, rule: Rule) -> str | None:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from softplc.core.clock import Clock, wait_for
+from softplc.core.plant_role import RoleHolder
 from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.engine.online_change.fresh import FreshModules, module_file, source_digest
 from softplc.config.loader import load_config
@@ -53,6 +54,8 @@ class _Runtime(Protocol):
 
     config: PlantConfig
     clock: Clock
+    program_clock: Clock  # what programs read (the runtime's clock, aligned with an active's in a standby)
+    role: RoleHolder  # the plant's role (programs stamp remote commands with its epoch)
     commands: Commands
     engine: ScanEngine
     tasks: Sequence[Task]
@@ -178,7 +181,7 @@ class OnlineChange:
         where = f"{program.location}: " if program.location is not None else ""
         try:
             with warm_start():
-                created = program.cls(ProgramContext(program.name, self.runtime.clock, dict(program.params)))
+                created = program.cls(ProgramContext(program.name, self.runtime.program_clock, dict(program.params), self.runtime.role))
                 created.restarted = True
                 created.first_scan = True
                 created.setup()
