@@ -25,6 +25,7 @@ from softplc.core.plant import StateRefused
 from softplc.core.plant_role import PlantRole, RoleTerm
 from softplc.core.roles import Role
 from softplc.core.tagdb import Origin, Rule
+from softplc.core.tags import Quality
 
 T = TypeVar("T")
 OPERATOR = Origin("opcua", "olga", "127.0.0.1", role=Role.OPERATOR)
@@ -192,6 +193,19 @@ async def test_a_write_acknowledged_by_the_active_but_not_applied_is_applied_by_
     assert await pair.fail_over() == 2  # the active died before its next cycle applied them
     await pair.clock.sleep_until(0.085)
     assert standby.db.value("spare") == 42 and standby.db.value("setpoint") == 2.5
+
+
+async def test_a_quality_change_journaled_by_the_active_keeps_the_value_on_the_successor(pair: Pair) -> None:
+    # A link's quality change carries no value (the tag keeps the one it has when applied): it
+    # crosses the sync link as such, never as a value of its own.
+    active, standby = pair.active, pair.standby
+    await pair.clock.sleep_until(0.055)
+    assert active.db.submit([("spare", 7)], OPERATOR) == [None]
+    active.db.submit_quality(["spare"], Quality.UNCERTAIN, "link:plc2")
+    assert await pair.fail_over() == 2
+    await pair.clock.sleep_until(0.085)
+    assert standby.db.value("spare") == 7
+    assert standby.db.get("spare").quality is Quality.UNCERTAIN
 
 
 async def test_forces_are_mirrored_and_stay_in_effect_after_the_takeover(pair: Pair) -> None:

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from softplc.adapters.redundancy import section as tags
-from softplc.adapters.redundancy.certificates import fingerprint, link_context
+from softplc.security.pair_certificates import fingerprint, link_context
 from softplc.adapters.redundancy.coordinator import Coordinator, Holder
 from softplc.adapters.redundancy.election import live
 from softplc.adapters.redundancy.settings import RedundancySettings

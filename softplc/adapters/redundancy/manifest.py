@@ -42,7 +42,7 @@ MANIFEST = Manifest(
     sections=(SECTION,),
     add_arguments=add_arguments,
     build=build,
-    commands=("softplc.adapters.redundancy.cli",),
+    commands=("softplc.clients.redundancy.cli",),
     figures={
         "active": gauge("softplc_redundancy_active", "1 while this runtime is the active member of its pair"),
         "epoch": gauge("softplc_redundancy_epoch", "the epoch of the current active term (etcd revision)"),

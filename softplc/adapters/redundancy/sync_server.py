@@ -19,7 +19,7 @@ import ssl
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from softplc.adapters.redundancy.certificates import fingerprint_of_der
+from softplc.security.pair_certificates import fingerprint_of_der
 from softplc.adapters.redundancy.link import VERSION, LinkRefused, check_hello, encode, expect, read_message
 
 if TYPE_CHECKING:

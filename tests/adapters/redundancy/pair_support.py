@@ -6,7 +6,7 @@ import socket
 import textwrap
 from pathlib import Path
 
-from softplc.adapters.redundancy.certificates import make_pair
+from softplc.security.pair_certificates import make_pair
 
 PLANT = """
 version: 1

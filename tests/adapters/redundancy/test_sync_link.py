@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from softplc.adapters.redundancy.certificates import link_context, make_pair
+from softplc.security.pair_certificates import link_context, make_pair
 from softplc.adapters.redundancy.link import VERSION, encode, read_message
 from softplc.app.runtime import Runtime
 

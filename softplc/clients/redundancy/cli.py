@@ -32,7 +32,7 @@ def add_commands(subparsers: Any) -> None:
 
 
 def cmd_keys(args: argparse.Namespace) -> int:
-    from softplc.adapters.redundancy.certificates import fingerprint, make_pair
+    from softplc.security.pair_certificates import fingerprint, make_pair
 
     names = [name.strip() for name in args.members.split(",") if name.strip()]
     if len(names) != 2 or names[0] == names[1]:
