@@ -172,6 +172,8 @@ class FleetAdapter:
         ids = self.robots.ids
         planners: list[PathPlanner] = []  # one per robot size, the map inflated now, not mid-run
         for robot in self.robots:
+            if robot.driver is DriverKind.VDA5050:
+                continue  # driven by the VDA 5050 master control (softplc/adapters/vda5050), on its own computer
             planner = self.floor.planner(robot.radius)
             if planner not in planners:
                 planners.append(planner)

@@ -90,18 +90,22 @@ class VehicleAgent:
         self._last_state = -1e9
         self._report: Report | None = None
         self._publishing: asyncio.Task[Any] | None = None
-        self._tasks: list[asyncio.Task[Any]] = []
 
     async def run(self) -> None:
-        """Connect and drive until cancelled."""
+        """Connect and drive until cancelled; then say OFFLINE and disconnect."""
         loop = ControlLoop(self.driver, VehicleIO(self), self.clock, self.cycle)
-        self._tasks = [asyncio.ensure_future(self.connection.run()), asyncio.ensure_future(loop.run())]
+        connection = asyncio.ensure_future(self.connection.run())
+        driving = asyncio.ensure_future(loop.run())
         try:
-            await asyncio.gather(*self._tasks)
+            await asyncio.wait({connection, driving}, return_when=asyncio.FIRST_COMPLETED)
+            for task in (connection, driving):
+                if task.done():
+                    task.result()  # a crash of either ends the agent with its error
         finally:
-            for task in self._tasks:
-                task.cancel()
-            await self.stop()
+            driving.cancel()
+            await self.stop()  # while the connection still runs: OFFLINE reaches the broker
+            connection.cancel()
+            await asyncio.gather(connection, driving, return_exceptions=True)
 
     async def stop(self) -> None:
         """Say OFFLINE (retained) and disconnect cleanly: the broker publishes no last will."""

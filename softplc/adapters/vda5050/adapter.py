@@ -1,0 +1,223 @@
+"""The VDA 5050 master control adapter: one MQTT connection, every vehicle's messages in, orders and instant actions out.
+
+What comes from the wire is checked before anything is believed: a topic of a vehicle not in
+robots.yaml, a message whose header names another vehicle than its topic, a payload that is not
+JSON or not a valid state (softplc.protocols.vda5050.validation) is dropped with a rate-limited
+log line and shown as the vehicle's error (an alarm) — never a crash, a stalled scan or a wrong
+pose. What the master sends is checked against the closed JSON Schemas first (a message that
+fails is not sent, and counted: `schema_violations` must stay 0).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from typing import TYPE_CHECKING, Any
+
+from softplc.adapters.vda5050.commands import register_commands
+from softplc.adapters.vda5050.control import MasterControl
+from softplc.adapters.vda5050.section import BROKER_TAG
+from softplc.adapters.vda5050.settings import VdaSettings
+from softplc.adapters.vda5050.vehicle import VehicleLink
+from softplc.core.tagdb import Origin
+from softplc.protocols.mqtt import MqttConnection, NotConnected
+from softplc.protocols.mqtt_settings import MqttSettings
+from softplc.protocols.vda5050 import topics
+from softplc.protocols.vda5050.messages import FactsheetSummary, VehicleState
+from softplc.protocols.vda5050.validation import MessageError, decode, problems
+from softplc.robotics.roadmap import Roadmap
+from softplc.robotics.robots import DriverKind, RobotFile
+from softplc.util.peers import PeerLog
+
+if TYPE_CHECKING:
+    from softplc.core.plant import Plant
+
+log = logging.getLogger(__name__)
+
+ROBOT_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "navreason", "route", "status", "xgoal", "ygoal", "online")
+FACTSHEET_FIELDS = (("length_mm", "length"), ("width_mm", "width"), ("height_mm", "height"), ("max_linear_speed", "speedMax"),
+                    ("max_angular_speed", "angularSpeedMax"), ("load_capacity", "maxLoadMass"))
+
+
+class VdaMaster:
+    """See the module docstring and softplc.adapters.vda5050."""
+
+    name = "vda5050"
+
+    def __init__(self, settings: VdaSettings, mqtt: MqttSettings, robots: RobotFile, roadmap: Roadmap) -> None:
+        self.settings = settings
+        self.mqtt = mqtt
+        self.robots = robots
+        self.roadmap = roadmap
+        self.vehicles = [robot for robot in robots if robot.driver is DriverKind.VDA5050]
+        self.links: dict[str, VehicleLink] = {}
+        self.control: MasterControl | None = None
+        self.connection: MqttConnection | None = None
+        self.plant: Plant | None = None
+        self.sent = 0
+        self.schema_violations = 0
+        self.bad_messages = 0
+        self.factsheet_differences: dict[str, list[str]] = {}
+        self._by_topic: dict[tuple[str, str], VehicleLink] = {}
+        self._tasks: list[asyncio.Task[Any]] = []
+        self._undo: list[Any] = []
+        self._wire_log = PeerLog(log, service="VDA 5050")
+        self._wake = asyncio.Event()
+
+    # -- adapter protocol ------------------------------------------------------------------------------
+
+    async def start(self, plant: Plant) -> None:
+        from softplc.core.plant import AdapterError
+
+        self.plant = plant
+        db = plant.tags
+        missing = [f"{robot.id}_{name}" for robot in self.vehicles for name in ROBOT_TAGS if f"{robot.id}_{name}" not in db]
+        if missing:
+            raise AdapterError(f"vda5050: the VDA 5050 robots of {self.robots.path} need tags tagdb.yaml does not declare: "
+                               f"{', '.join(missing[:8])} (the robot template: see docs/vda5050.md)")
+        for robot in self.vehicles:
+            link = VehicleLink(robot, self.settings.version, db)
+            self.links[robot.id] = link
+            assert robot.vehicle is not None
+            self._by_topic[(robot.vehicle.manufacturer, robot.vehicle.serial_number)] = link
+            link.go_offline("no state yet")
+        self.control = MasterControl(self.roadmap, self.settings, self.links, db)
+        db.submit([(f"{robot.id}_radius", robot.radius) for robot in self.vehicles if f"{robot.id}_radius" in db],
+                  Origin("vda5050", role=None))
+        connection = self.connection = MqttConnection(self.mqtt, "vda5050", plant.clock)
+        interface, version = self.settings.interface, self.settings.version
+        connection.subscribe(topics.vehicle_filter(interface, version, topics.STATE), self._on_message)
+        connection.subscribe(topics.vehicle_filter(interface, version, topics.CONNECTION), self._on_message, qos=1)
+        connection.subscribe(topics.vehicle_filter(interface, version, topics.FACTSHEET), self._on_message)
+        self._undo.append(connection.on_state(self._on_broker))
+        self._undo += register_commands(plant.commands, self)
+        self._tasks = [plant.spawn(connection.run(), "vda5050-mqtt"), plant.spawn(self._run(), "vda5050-master")]
+
+    async def stop(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            try:
+                await task
+            except (asyncio.CancelledError, Exception):
+                pass
+        self._tasks.clear()
+        if self.connection is not None:
+            await self.connection.close()
+        for undo in self._undo:
+            undo()
+        self._undo.clear()
+
+    def describe(self) -> str:
+        return (f"VDA 5050 {self.settings.version} master control of {len(self.vehicles)} vehicles on {self.mqtt.url} "
+                f"(roadmap {self.roadmap.path.name}: {len(self.roadmap.nodes)} nodes, {len(self.roadmap.lanes)} lane directions)")
+
+    def metrics(self) -> dict[str, Any]:
+        control = self.control
+        return {
+            "vehicles_alive": sum(1 for link in self.links.values() if link.alive),
+            "messages_sent": self.sent, "schema_violations": self.schema_violations, "bad_messages": self.bad_messages,
+            "order_resends": sum(link.trip.resends for link in self.links.values() if link.trip is not None),
+            "reservation_conflicts": control.traffic.conflicts if control else 0,
+            "deadlocks_broken": control.deadlocks_broken if control else 0,
+        }
+
+    # -- the master's loop --------------------------------------------------------------------------------------
+
+    async def _run(self) -> None:
+        assert self.plant is not None and self.control is not None
+        clock, control = self.plant.clock, self.control
+        while True:
+            await clock.sleep(self.settings.tick)
+            control.tick(clock.now())
+            await self.flush()
+
+    async def flush(self) -> None:
+        """Publish what the control decided, each message checked against its closed schema first."""
+        assert self.plant is not None and self.control is not None and self.connection is not None
+        outbox, self.control.outbox = self.control.outbox, []
+        for link, name, body in outbox:
+            message = {**link.headers.next(name, self.plant.clock.wall()), **body}
+            found = problems("order" if name == topics.ORDER else "instantActions", self.settings.version, message)
+            if found:
+                self.schema_violations += 1
+                log.error("vda5050: not sending an invalid %s to %s: %s", name, link.id, "; ".join(found[:3]))
+                continue
+            if name == topics.INSTANT_ACTIONS and link.identity.instant_actions_key != "actions":
+                message[link.identity.instant_actions_key] = message.pop("actions")  # vda-5050-lib's 2.0 draft key
+            topic = topics.topic(self.settings.interface, self.settings.version, link.identity.manufacturer,
+                                 link.identity.serial_number, name)
+            try:
+                await self.connection.publish(topic, json.dumps(message, separators=(",", ":")))
+                self.sent += 1
+            except NotConnected:
+                pass  # the broker is away: the resend after the reconnect carries it
+
+    # -- what comes from the wire --------------------------------------------------------------------------------------
+
+    def _on_broker(self, up: bool) -> None:
+        assert self.plant is not None and self.control is not None
+        self.plant.tags.submit([(BROKER_TAG, up)], Origin("vda5050", role=None))
+        self.control.broker(up)
+        if up:
+            log.info("vda5050: connected to %s; subscribed to the vehicles' state, connection and factsheet", self.mqtt.url)
+
+    def _on_message(self, topic: str, payload: bytes, retained: bool) -> None:
+        assert self.plant is not None and self.control is not None
+        address = topics.parse(topic, self.settings.interface, self.settings.version)
+        if address is None:
+            return
+        link = self._by_topic.get((address.manufacturer, address.serial_number))
+        if link is None:
+            self._wire_log.warning(f"{address.manufacturer}/{address.serial_number}", "messages of unknown vehicles",
+                                   "VDA 5050: a %s message of %s/%s, which is no driver: vda5050 robot of %s: ignored",
+                                   address.name, address.manufacturer, address.serial_number, self.robots.path)
+            return
+        if address.name not in (topics.STATE, topics.CONNECTION, topics.FACTSHEET):
+            return
+        try:
+            message = decode(payload, address.name, self.settings.version, closed=False)
+        except MessageError as error:
+            self._bad(link, address.name, str(error))
+            return
+        if (message["manufacturer"], message["serialNumber"]) != (link.identity.manufacturer, link.identity.serial_number):
+            self._bad(link, address.name, f"the message on {link.id}'s topic says it is from {message['manufacturer']}/"
+                                          f"{message['serialNumber']}")
+            return
+        now = self.plant.clock.now()
+        if address.name == topics.STATE:
+            state = VehicleState.from_message(message)
+            if state.position is not None and state.map_id and state.map_id != self.roadmap.map_id:
+                self._bad(link, "state", f"its position is on map {state.map_id!r}, the roadmap's is {self.roadmap.map_id!r}")
+                return
+            link.note = ""
+            self.control.on_state(link, state, now)
+        elif address.name == topics.CONNECTION:
+            self.control.on_connection(link, message["connectionState"])
+        else:
+            self._factsheet(link, message)
+
+    def _bad(self, link: VehicleLink, kind: str, why: str) -> None:
+        self.bad_messages += 1
+        link.bad_messages += 1
+        self._wire_log.warning(link.id, f"bad {kind} messages", "VDA 5050 vehicle %s: a bad %s message dropped: %s", link.id, kind, why,
+                               detail=why[:80])
+        link.note = f"master: bad {kind} message dropped: {why}"[:500]
+        link.write(_error=link.error_text(link.state))
+
+    def _factsheet(self, link: VehicleLink, message: dict[str, Any]) -> None:
+        """A factsheet: the vehicle's own figures for the compatibility of case II; robots.yaml's win, differences said."""
+        summary = FactsheetSummary.from_message(message)
+        link.factsheet = summary
+        spec = link.spec
+        differences = []
+        for ours, theirs in FACTSHEET_FIELDS:
+            value = getattr(summary, ours if ours != "load_capacity" else "max_load_mass")
+            declared = getattr(spec, ours)
+            if value is not None and abs(value - declared) > 1e-6 * max(1.0, abs(declared)):
+                differences.append(f"{ours}: robots.yaml {declared:g}, factsheet {theirs} {value:g}")
+        if differences != self.factsheet_differences.get(link.id):
+            self.factsheet_differences[link.id] = differences
+            if differences:
+                log.warning("vehicle %s: its factsheet differs from robots.yaml, which wins: %s", link.id, "; ".join(differences))
