@@ -13,20 +13,17 @@ from __future__ import annotations
 import uuid
 from collections.abc import Callable, Mapping
 from dataclasses import asdict
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.core.origin import Origin
 from softplc.protocols.vda5050.messages import action
 
-if TYPE_CHECKING:
-    from softplc.adapters.vda5050.adapter import VdaMaster
-
 INSTANT_ACTIONS = ("startPause", "stopPause", "cancelOrder", "initPosition", "factsheetRequest", "stateRequest")
 
 
-def register_commands(commands: Commands, master: VdaMaster) -> list[Callable[[], None]]:
-    """Register the `vda5050.*` queries and the instant-action command; returns their unregisters."""
+def register_commands(commands: Commands, master: Any) -> list[Callable[[], None]]:
+    """Register the `vda5050.*` queries and the instant-action command for `master` (the VdaMaster); returns their unregisters."""
 
     def vehicles(arguments: Mapping[str, Any], origin: Origin) -> list[dict[str, Any]]:
         now = master.plant.clock.now() if master.plant is not None else 0.0
