@@ -144,3 +144,48 @@ class Wire:
         assert self.task is not None
         self.task.cancel()
         await self.connection.close()
+
+
+NODE_DIR = REPO / "tests" / "vda5050_node"
+
+
+class LibVehicles:
+    """vda-5050-lib virtual vehicles (tests/vda5050_node/vehicles.js) in one Node process: `kill()` is a crash."""
+
+    def __init__(self, port: int, vehicles: list[dict[str, Any]], **options: Any) -> None:
+        self.config = {"broker": f"mqtt://127.0.0.1:{port}", "vehicles": vehicles, "heartbeat": 2, "stateInterval": 1000, **options}
+        self.process: Any = None
+
+    @staticmethod
+    def available() -> str:
+        """'' when Node.js and vda-5050-lib are installed, else what is missing."""
+        import shutil
+
+        if shutil.which("node") is None:
+            return "node is missing (apt-get install nodejs npm, or scripts/install-test-tools.sh)"
+        if not (NODE_DIR / "node_modules" / "vda-5050-lib").is_dir():
+            return "vda-5050-lib is missing (scripts/install-test-tools.sh installs it into tests/vda5050_node)"
+        return ""
+
+    async def __aenter__(self) -> LibVehicles:
+        self.process = await asyncio.create_subprocess_exec(
+            "node", str(NODE_DIR / "vehicles.js"), json.dumps(self.config), cwd=NODE_DIR,
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT)
+        assert self.process.stdout is not None
+        line = await asyncio.wait_for(self.process.stdout.readline(), 30)
+        if b'"ready"' not in line:
+            rest = await asyncio.wait_for(self.process.stdout.read(4000), 5)
+            raise RuntimeError(f"vehicles.js did not start: {(line + rest).decode(errors='replace')}")
+        return self
+
+    def kill(self) -> None:
+        self.process.kill()
+
+    async def __aexit__(self, *exc: Any) -> None:
+        if self.process.returncode is None:
+            self.process.terminate()
+            try:
+                await asyncio.wait_for(self.process.wait(), 10)
+            except asyncio.TimeoutError:
+                self.process.kill()
+                await self.process.wait()

@@ -25,7 +25,7 @@ from softplc.protocols.mqtt import MqttConnection, NotConnected
 from softplc.protocols.mqtt_settings import MqttSettings
 from softplc.protocols.vda5050 import topics
 from softplc.protocols.vda5050.messages import FactsheetSummary, VehicleState
-from softplc.protocols.vda5050.validation import MessageError, decode, problems
+from softplc.protocols.vda5050.validation import MessageError, decode, parse_json, problems
 from softplc.robotics.roadmap import Roadmap
 from softplc.robotics.robots import DriverKind, RobotFile
 from softplc.util.peers import PeerLog
@@ -179,8 +179,13 @@ class VdaMaster:
         try:
             message = decode(payload, address.name, self.settings.version, closed=False)
         except MessageError as error:
-            self._bad(link, address.name, str(error))
-            return
+            if address.name != topics.FACTSHEET or not isinstance(document := _object(payload), dict):
+                self._bad(link, address.name, str(error))
+                return
+            # A factsheet off the tables is still worth its figures (vda-5050-lib's own schema differs from 2.0's table).
+            self._wire_log.warning(link.id, "factsheets off the tables", "VDA 5050 vehicle %s: its factsheet deviates from the "
+                                   "%s tables (%s); its usable figures are taken", link.id, self.settings.version, error)
+            message = {"manufacturer": link.identity.manufacturer, "serialNumber": link.identity.serial_number, **document}
         if (message["manufacturer"], message["serialNumber"]) != (link.identity.manufacturer, link.identity.serial_number):
             self._bad(link, address.name, f"the message on {link.id}'s topic says it is from {message['manufacturer']}/"
                                           f"{message['serialNumber']}")
@@ -221,3 +226,11 @@ class VdaMaster:
             self.factsheet_differences[link.id] = differences
             if differences:
                 log.warning("vehicle %s: its factsheet differs from robots.yaml, which wins: %s", link.id, "; ".join(differences))
+
+
+def _object(payload: bytes) -> Any:
+    """The JSON value of a payload, None when it is not JSON."""
+    try:
+        return parse_json(payload)
+    except MessageError:
+        return None

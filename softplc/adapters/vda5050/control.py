@@ -59,6 +59,11 @@ class MasterControl:
             here = link.here(self.roadmap)
             if here and link.trip is None:
                 self.traffic.stand(link.id, here)
+            if link.factsheet is None and not link.factsheet_requested:  # vda-5050-lib sends one only when asked
+                link.factsheet_requested = True
+                self._orders += 1
+                self.outbox.append((link, topics.INSTANT_ACTIONS,
+                                    {"actions": [action("factsheetRequest", f"{link.id}.{self.session}.factsheet.{self._orders}")]}))
         trip = link.trip
         ours = {trip.order_id} if trip is not None else set()
         if state.order_id and state.order_id not in ours | link.previous_orders and state.order_id != link.foreign_order:

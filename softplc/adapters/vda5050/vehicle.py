@@ -44,6 +44,7 @@ class VehicleLink:
         self.alive = False
         self.connection = ""
         self.factsheet: FactsheetSummary | None = None
+        self.factsheet_requested = False
         self.trip: Trip | None = None
         self.previous_orders: set[str] = set()  # ours, finished or replaced: a state may still name them
         self.goal: tuple[float, float] = (float(db.value(f"{spec.id}_xgoal")), float(db.value(f"{spec.id}_ygoal")))
