@@ -35,6 +35,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+MAX_MESSAGE = 1024 * 1024  # bytes: a vehicle's state is a few kB; a bigger message is refused and shown as its error
+MAX_RECEIVED = 64 * 1024 * 1024  # bytes the connection hands on at all (beyond: dropped there, logged, not attributed)
 ROBOT_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "navreason", "route", "status", "xgoal", "ygoal", "online")
 FACTSHEET_FIELDS = (("length_mm", "length"), ("width_mm", "width"), ("height_mm", "height"), ("max_linear_speed", "speedMax"),
                     ("max_angular_speed", "angularSpeedMax"), ("load_capacity", "maxLoadMass"))
@@ -85,7 +87,7 @@ class VdaMaster:
         self.control = MasterControl(self.roadmap, self.settings, self.links, db)
         db.submit([(f"{robot.id}_radius", robot.radius) for robot in self.vehicles if f"{robot.id}_radius" in db],
                   Origin("vda5050", role=None))
-        connection = self.connection = MqttConnection(self.mqtt, "vda5050", plant.clock)
+        connection = self.connection = MqttConnection(self.mqtt, "vda5050", plant.clock, max_payload=MAX_RECEIVED)
         interface, version = self.settings.interface, self.settings.version
         connection.subscribe(topics.vehicle_filter(interface, version, topics.STATE), self._on_message)
         connection.subscribe(topics.vehicle_filter(interface, version, topics.CONNECTION), self._on_message, qos=1)
@@ -175,6 +177,9 @@ class VdaMaster:
                                    address.name, address.manufacturer, address.serial_number, self.robots.path)
             return
         if address.name not in (topics.STATE, topics.CONNECTION, topics.FACTSHEET):
+            return
+        if len(payload) > MAX_MESSAGE:
+            self._bad(link, address.name, f"{len(payload)} bytes, more than the {MAX_MESSAGE} a VDA 5050 message may have here")
             return
         try:
             message = decode(payload, address.name, self.settings.version, closed=False)
