@@ -23,3 +23,8 @@ if command -v npm >/dev/null 2>&1 && [ ! -d tests/node/node_modules/node-opcua-c
   (cd tests/node && npm install --silent --no-audit --no-fund >/dev/null 2>&1) \
     || echo "warning: npm install in tests/node failed; node-opcua tests will say so" >&2
 fi
+# The VDA 5050 tests drive vda-5050-lib's virtual vehicles (tests/vda5050_node/vehicles.js), a counterpart nobody here wrote.
+if command -v npm >/dev/null 2>&1 && [ ! -d tests/vda5050_node/node_modules/vda-5050-lib ] && [ -f tests/vda5050_node/package.json ]; then
+  (cd tests/vda5050_node && npm ci --silent --no-audit --no-fund >/dev/null 2>&1) \
+    || echo "warning: npm ci in tests/vda5050_node failed; the VDA 5050 tests with vda-5050-lib will say so" >&2
+fi
