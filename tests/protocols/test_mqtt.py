@@ -83,3 +83,18 @@ def test_the_settings_come_from_the_mqtt_section(make_config, tmp_path: Path) ->
     settings = MqttSettings.from_config(config)
     assert (settings.host, settings.port, settings.tls is not None, settings.keepalive, settings.protocol) == ("broker.example", 8884, True, 20.0, "3.1.1")
     assert settings.client_id == "softplc-line1" and settings.password() == "secret" and settings.url == "mqtts://broker.example:8884"
+
+
+async def test_mqtt_3_1_1_connects(mosquitto) -> None:
+    """protocol: "3.1.1" (what the embedded broker speaks): paho refuses a clean_start flag outside MQTT 5."""
+    connection = MqttConnection(MqttSettings(port=mosquitto.port, protocol="3.1.1"), "old", RealClock())
+    received: list[bytes] = []
+    connection.subscribe("old/#", lambda topic, payload, retained: received.append(payload))
+    task = asyncio.create_task(connection.run())
+    try:
+        await until(lambda: connection.connected, what="connected with MQTT 3.1.1")
+        await connection.publish("old/x", b"1", qos=1)
+        await until(lambda: received == [b"1"], what="a message back")
+    finally:
+        task.cancel()
+        await connection.close()
