@@ -187,12 +187,12 @@ def _roadmap_from(path: Path, data: Any, source: SourceMap) -> Roadmap:
         length = math.hypot(end.x - start.x, end.y - start.y)
         speed = float(item["max_speed"]) if "max_speed" in item else None
         directions = [(start.id, end.id)] if item.get("one_way") else [(start.id, end.id), (end.id, start.id)]
+        taken = [f"{a} → {b}" for a, b in directions if f"{a}-{b}" in lanes]
+        if taken:
+            found.append(source.problem(("roadmap", "lanes", index), f"lane {taken[0]} declared twice"))
+            continue
         for a, b in directions:
-            edge_id = f"{a}-{b}"
-            if edge_id in lanes:
-                found.append(source.problem(("roadmap", "lanes", index), f"lane {a} → {b} declared twice"))
-                continue
-            lanes[edge_id] = Lane(edge_id, a, b, length, speed)
+            lanes[f"{a}-{b}"] = Lane(f"{a}-{b}", a, b, length, speed)
     if found:
         raise ConfigError(found)
     load_handling = section.get("load_handling", {"stationType": "floor", "loadType": "EPAL"})
