@@ -56,6 +56,8 @@ class MasterControl:
         if not link.alive:
             link.alive = True
             log.info("VDA 5050 vehicle %s (%s/%s) reports", link.id, link.identity.manufacturer, link.identity.serial_number)
+            if link.trip is None:
+                link.write(navstate="idle", navreason="")  # back: it takes trips again
             here = link.here(self.roadmap)
             if here and link.trip is None:
                 self.traffic.stand(link.id, here)

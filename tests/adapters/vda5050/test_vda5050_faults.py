@@ -99,6 +99,7 @@ async def test_a_vehicle_killed_mid_order_gives_its_task_back_and_a_frozen_one_i
             finally:
                 os.kill(second.process.pid, signal.SIGCONT)
             await wait_for(lambda: db.value("r02_online") and db["r02_xpos"].quality is Quality.GOOD, 5, "r02 back on its next state")
+            assert db.value("r02_navstate") == "idle"  # not 'offline' any more: the motion sequencer gives it trips again
     finally:
         await runtime.stop()
 
