@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import json
 from pathlib import Path
 
 from softplc.clients.robot_agent.vda5050.agent import VehicleAgent
@@ -63,3 +64,29 @@ async def test_a_goal_becomes_an_order_the_vehicle_drives_and_every_message_fits
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         await runtime.stop()
+
+
+async def test_our_vehicle_drives_through_every_node_of_its_base_at_the_turtlebots_own_speed(tmp_path: Path) -> None:
+    """On the simulated clock, no broker: the agent's TurtleBot (0.2 m/s) passes each node within its deviation and
+    runs its pick; it once stopped 0.4 m short of the first node, its driver restarting the trip at every cycle."""
+    from softplc.core.clock import SimClock
+    from softplc.protocols.vda5050.messages import Headers, action, edge, node
+    from softplc.robotics.loop import ControlLoop
+    from softplc.clients.robot_agent.vda5050.agent import VehicleIO
+
+    tagdb = write_plant(tmp_path, "mqtt://127.0.0.1:1", [vehicle_yaml("r01", "tb1", 10.0, 7.6, speed=0.2)])
+    clock = SimClock()
+    vehicle = VehicleAgent(load_robots(tagdb.parent / "robots.yaml")["r01"], factory_floor(), MqttSettings(port=1), clock=clock)
+    route = [("q1", 10.0, 7.6), ("u4", 10.0, 6.6), ("u5", 12.5, 6.6)]
+    nodes = [node(name, 2 * i, True, x, y, "factory", deviation=0.3) for i, (name, x, y) in enumerate(route)]
+    nodes[-1]["actions"] = [action("pick", "p1", "HARD")]
+    edges = [edge(f"{route[i][0]}-{route[i + 1][0]}", 2 * i + 1, True, route[i][0], route[i + 1][0]) for i in range(2)]
+    order = {**Headers("2.0", "softplc", "tb1").next("order", 0.0), "orderId": "o1", "orderUpdateId": 0, "nodes": nodes, "edges": edges}
+    vehicle.vehicle.on_order(json.dumps(order).encode())  # straight in: no broker here (states are not sent)
+    loop = asyncio.ensure_future(ControlLoop(vehicle.driver, VehicleIO(vehicle), clock, 0.1).run())
+    try:
+        await clock.drive(until=60.0)
+    finally:
+        loop.cancel()
+    assert vehicle.vehicle.last_node_id == "u5" and vehicle.vehicle.nodes == []
+    assert vehicle.vehicle.actions["p1"].status == "FINISHED"

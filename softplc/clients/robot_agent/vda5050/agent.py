@@ -49,7 +49,9 @@ class VehicleIO:
         target = vehicle.target(driver.pose)
         if target is not None:
             self._hold = None
-            return Command(target[0], target[1], True)
+            # A new goal starts the driver by itself; status true would make it start again at every cycle
+            # once it is within 0.5 m (its arrival), and so stop short of a node it must pass within its deviation.
+            return Command(target[0], target[1], False)
         if self._hold is None:  # stand where it is (a decision point, paused, an action, cancelled)
             self._hold = (driver.pose.x, driver.pose.y)
         return Command(self._hold[0], self._hold[1], False)
