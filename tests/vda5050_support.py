@@ -82,8 +82,9 @@ def write_plant(directory: Path, url: str, robots: list[str], *, version: str = 
     return path
 
 
-async def start_plant(tagdb: Path) -> Runtime:
-    """The plant's runtime with every adapter its configuration builds (fleet, vda5050, alarms...), on the real clock."""
+async def start_plant(tagdb: Path, *, hmi: bool = False) -> Runtime:
+    """The plant's runtime with every adapter its configuration builds (fleet, vda5050, alarms...), on the real clock;
+    with `hmi`, the web HMI too, on a free port (`adapter(runtime, "hmi").url`)."""
     from softplc.app.adapters import build_adapters
 
     config = load_config(tagdb)
@@ -92,6 +93,11 @@ async def start_plant(tagdb: Path) -> Runtime:
         if adapter.name in ("opcua", "modbus", "hmi", "history", "metrics"):
             continue
         runtime.add_adapter(adapter)
+    if hmi:
+        from softplc.adapters.hmi.server import HmiServer
+        from softplc.adapters.hmi.settings import HmiSettings
+
+        runtime.add_adapter(HmiServer(config, HmiSettings.from_config(config).override(port=0)))
     await runtime.start()
     return runtime
 

@@ -27,6 +27,7 @@ class Trip:
     goal_actions: list[dict[str, Any]] = field(default_factory=list)  # run on the last node (pick, drop)
     first_deviation: float = 0.3  # the first node's allowedDeviationXY: wide enough to hold where the vehicle stands
     released: int = 0  # index of the decision point
+    passed: int = 0  # index of the node the vehicle last traversed (as its state says)
     update_id: int = -1  # orderUpdateId of the last message sent (-1: nothing sent yet)
     sent_from: int = 0  # the node index the last message started at (its stitching node)
     body: dict[str, Any] | None = None  # the last order sent, without header: what a resend repeats
@@ -79,7 +80,8 @@ class Trip:
 
     @property
     def base(self) -> list[str]:
-        return self.route[: self.released + 1]
+        """The released nodes still ahead, from the one the vehicle last traversed."""
+        return self.route[self.passed: self.released + 1]
 
     @property
     def horizon(self) -> list[str]:
