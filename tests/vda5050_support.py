@@ -82,7 +82,7 @@ def write_plant(directory: Path, url: str, robots: list[str], *, version: str = 
     return path
 
 
-async def start_plant(tagdb: Path, *, hmi: bool = False) -> Runtime:
+async def start_plant(tagdb: Path, *, hmi: bool = False, opcua: bool = False) -> Runtime:
     """The plant's runtime with every adapter its configuration builds (fleet, vda5050, alarms...), on the real clock;
     with `hmi`, the web HMI too, on a free port (`adapter(runtime, "hmi").url`)."""
     from softplc.app.adapters import build_adapters
@@ -98,6 +98,13 @@ async def start_plant(tagdb: Path, *, hmi: bool = False) -> Runtime:
         from softplc.adapters.hmi.settings import HmiSettings
 
         runtime.add_adapter(HmiServer(config, HmiSettings.from_config(config).override(port=0)))
+    if opcua:  # on a free port (`adapter(runtime, "opcua").endpoint`), with a user of each role (tests/opcua_support.py)
+        from softplc.adapters.opcua import OpcUaServer, OpcUaSettings
+        from tests.opcua_support import add_users
+
+        (tagdb.parent / "state").mkdir(exist_ok=True)
+        add_users(tagdb.parent / "state")
+        runtime.add_adapter(OpcUaServer(OpcUaSettings(endpoint="opc.tcp://127.0.0.1:0/softplc/")))
     await runtime.start()
     return runtime
 
