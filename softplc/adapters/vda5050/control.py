@@ -261,26 +261,53 @@ class MasterControl:
                 link.show_trip()
 
     def _resolve_deadlocks(self) -> None:
+        """Break each circle of vehicles waiting for each other: one goes round the others, or, where there is no way
+        round (a station at the end of a spur, met head-on), steps aside to a free node off their way and comes back."""
         for cycle in self.traffic.deadlocks():
             for victim in sorted(cycle, reverse=True):
                 link = self.links.get(victim)
                 trip = link.trip if link is not None else None
                 if trip is None:
                     continue
-                blocked = set().union(*(self.traffic.nodes_of(other) for other in cycle if other != victim))
-                tail = self.roadmap.route(trip.route[trip.released], trip.goal_node, avoid=frozenset(blocked))
+                others = [other for other in cycle if other != victim]
+                tail = self._detour(trip, others) or self._retreat(trip, others)
                 if tail is None:
                     continue
                 trip.route = trip.route[: trip.released + 1] + tail[1:]
                 trip.body = None
                 self.traffic.waits.pop(victim, None)
                 self.deadlocks_broken += 1
-                log.info("deadlock of %s broken: %s goes round via %s", " ↔ ".join(cycle), victim, " ".join(tail))
+                log.info("deadlock of %s broken: %s now goes %s", " ↔ ".join(cycle), victim, " ".join(tail))
                 break
             else:
                 for name in cycle:
                     if name in self.links:
                         self.links[name].write(navreason=f"deadlock with {', '.join(o for o in cycle if o != name)}: no way round")
+
+    def _detour(self, trip: Trip, others: list[str]) -> list[str] | None:
+        """A way from the decision point to the goal round the nodes the others hold; None if none, or no different one."""
+        blocked = set().union(*(self.traffic.nodes_of(other) for other in others))
+        tail = self.roadmap.route(trip.route[trip.released], trip.goal_node, avoid=frozenset(blocked))
+        return tail if tail is not None and tail != trip.route[trip.released:] else None
+
+    def _retreat(self, trip: Trip, others: list[str]) -> list[str] | None:
+        """To the nearest free node off the others' ways, then on to the goal (a passing place)."""
+        their_ways: set[str] = set()
+        for other in others:
+            other_trip = self.links[other].trip if other in self.links else None
+            if other_trip is not None:
+                their_ways.update(other_trip.route[other_trip.passed:])
+        held = self.traffic.holder_nodes()
+        here = trip.route[trip.released]
+        origin = self.roadmap.nodes[here]
+        candidates = sorted((node for node in self.roadmap.nodes.values() if node.id not in their_ways and node.id not in held),
+                            key=lambda node: math.hypot(node.x - origin.x, node.y - origin.y))
+        for refuge in candidates[:8]:
+            there = self.roadmap.route(here, refuge.id, avoid=frozenset(held - {here}))
+            back = self.roadmap.route(refuge.id, trip.goal_node)
+            if there is not None and back is not None:
+                return there + back[1:]
+        return None
 
     def _make_way(self) -> None:
         if not self.settings.make_way:
