@@ -204,7 +204,7 @@ class MasterControl:
         position = trip.position(state.last_node_id, state.last_node_sequence_id)
         if position >= 0:
             trip.passed = position
-            self.traffic.release_behind(link.id, trip.route, position)
+            self.traffic.release_behind(link.id, trip.route, position, trip.released)
         ids = [item["actionId"] for item in trip.goal_actions]
         finished = all(state.action_states.get(action_id) in ("FINISHED", "FAILED") for action_id in ids)
         if position == len(trip.route) - 1 and trip.acknowledged and not state.node_states and finished:

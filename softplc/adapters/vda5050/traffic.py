@@ -76,9 +76,11 @@ class Reservations:
             self.waits.pop(vehicle, None)
         return released
 
-    def release_behind(self, vehicle: str, route: list[str], position: int) -> None:
-        """Give back the nodes and lanes before route[position] (the vehicle has passed them)."""
-        keep = {node_resource(route[position])}
+    def release_behind(self, vehicle: str, route: list[str], position: int, released: int) -> None:
+        """Give back the nodes and lanes before route[position] (the vehicle has passed them), but none its base still
+        needs: a route that comes back (a passing place) meets a node or lane again further on."""
+        keep = {node_resource(node) for node in route[position: released + 1]}
+        keep |= {lane_resource(route[i], route[i + 1]) for i in range(position, released)}
         passed = [node_resource(node) for node in route[:position]]
         passed += [lane_resource(route[i], route[i + 1]) for i in range(position)]
         self.release(vehicle, [resource for resource in passed if resource not in keep])

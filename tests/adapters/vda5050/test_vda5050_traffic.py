@@ -25,8 +25,14 @@ def test_a_base_grows_only_onto_free_nodes_and_lanes_and_is_given_back_behind() 
     assert traffic.deadlocks() == [["a", "b"]]
     traffic.release_all("b", keep_node="l3")  # b went elsewhere
     assert traffic.extend("a", ["p1", "p2", "p3", "l3"], 1, 1, 3) == 2  # p3 free now; l3 is b's
-    traffic.release_behind("a", ["p1", "p2", "p3", "l3"], 2)
+    traffic.release_behind("a", ["p1", "p2", "p3", "l3"], 2, 2)
     assert traffic.holder == {node_resource("p3"): "a", node_resource("l3"): "b"}
+    # A passing place: out to l3 and back over p3; passing p3 the first time gives back nothing the base needs again.
+    traffic.release_all("b")
+    loop = ["p2", "p3", "l3", "p3", "p2"]
+    assert traffic.extend("a", loop, 0, 0, 4) == 4
+    traffic.release_behind("a", loop, 2, 4)  # at l3: p2, p3 and their lanes are ahead again
+    assert traffic.nodes_of("a") == {"p2", "p3", "l3"} and lane_resource("p3", "l3") in traffic.held["a"]
     assert lane_resource("p2", "p3") == lane_resource("p3", "p2")  # a lane is one resource for both directions
     assert traffic.conflicts == 0
 
