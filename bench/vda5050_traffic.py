@@ -11,7 +11,7 @@ stands on, and the lane and end node of the edge each drives on.
 
 Goal (issue 24): 0 reservation conflicts over 10 simulated minutes with 50 vehicles on one roadmap.
 
-    .venv/bin/python bench/vda5050_traffic.py [--vehicles 50] [--minutes 10] [--columns 14 --rows 9] [--seed 1]
+    .venv/bin/python bench/vda5050_traffic.py [--vehicles 50] [--minutes 10] [--columns 16 --rows 12] [--seed 1]
 """
 
 from __future__ import annotations
@@ -94,6 +94,7 @@ class Simulated:
         self.logic.pose = self.pose
         self.headers = Headers("2.0", "bench", serial)
         self.moving = False
+        self.reported = -math.inf
 
     def step(self, now: float) -> None:
         target = self.logic.target(self.pose)
@@ -139,6 +140,10 @@ async def run(args: argparse.Namespace) -> dict[str, float]:
     await runtime.start()
     try:
         db = runtime.db
+
+        def arrivals(tags) -> None:
+            figures["trips"] += sum(1 for tag in tags if tag.name.endswith("_navstate") and tag.value == "arrived")
+        db.on_change(arrivals)
         links = {robot.id: VehicleLink(robot, "2.0", db) for robot in robots}
         control = MasterControl(roadmap, settings, links, db)
         vehicles = {}
@@ -152,7 +157,11 @@ async def run(args: argparse.Namespace) -> dict[str, float]:
             now = clock.now()
             for robot_id, vehicle in vehicles.items():
                 vehicle.step(now)
-                control.on_state(links[robot_id], VehicleState.from_message(decode(vehicle.state(clock.wall()), "state", "2.0")), now)
+                # A vehicle's state on every event (a node passed, an order taken) and at least every second.
+                if vehicle.logic.changed or now - vehicle.reported >= 1.0:
+                    vehicle.logic.changed = False
+                    vehicle.reported = now
+                    control.on_state(links[robot_id], VehicleState.from_message(decode(vehicle.state(clock.wall()), "state", "2.0")), now)
             control.tick(now)
             for link, topic, body in control.outbox:
                 message = {**link.headers.next(topic, clock.wall()), **body}
@@ -183,8 +192,6 @@ async def run(args: argparse.Namespace) -> dict[str, float]:
             for robot_id, link in links.items():  # a free vehicle gets a new random goal, as a dispatcher would
                 if link.trip is None and not db.value(f"{robot_id}_status") and rng.random() < 0.05:
                     if db.value(f"{robot_id}_navstate") in ("arrived", "idle", "failed", "") or link.states > 0:
-                        if db.value(f"{robot_id}_navstate") == "arrived":
-                            figures["trips"] += 1
                         goal = roadmap.nodes[rng.choice(names)]
                         db.submit([(f"{robot_id}_xgoal", goal.x), (f"{robot_id}_ygoal", goal.y), (f"{robot_id}_status", True)], "bench")
                         db.submit([(f"{robot_id}_navstate", "planning")], "bench")
@@ -203,8 +210,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--vehicles", type=int, default=50)
     parser.add_argument("--minutes", type=float, default=10.0)
-    parser.add_argument("--columns", type=int, default=14)
-    parser.add_argument("--rows", type=int, default=9)
+    parser.add_argument("--columns", type=int, default=16)
+    parser.add_argument("--rows", type=int, default=12)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--trace", default="", help="print every message to this vehicle")
     parser.add_argument("--explain", type=int, default=0, help="print the first N conflicts with both vehicles' trips and holdings")

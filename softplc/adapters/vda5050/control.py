@@ -29,7 +29,8 @@ from softplc.robotics.roadmap import Roadmap
 log = logging.getLogger(__name__)
 
 REJECTIONS = ("validationError", "orderError", "orderUpdateError", "noRouteError")
-TO_SOURCE, TO_DESTINATION = 1, 3  # the motion sequencer's currloc on the way to a station (programs/motion_sequencer.py)
+TO_SOURCE, TO_DESTINATION = 1, 3
+REROUTE_PATIENCE = 5.0  # s a re-routed vehicle gets to move before it is re-routed again  # the motion sequencer's currloc on the way to a station (programs/motion_sequencer.py)
 
 
 class MasterControl:
@@ -115,7 +116,7 @@ class MasterControl:
             if link.alive:
                 self._goal(link, now)
         self._release()
-        self._resolve_deadlocks()
+        self._resolve_deadlocks(now)
         self._make_way()
         for link in self.links.values():
             if link.alive and link.trip is not None:
@@ -260,21 +261,22 @@ class MasterControl:
                 trip.body = None  # an update is due
                 link.show_trip()
 
-    def _resolve_deadlocks(self) -> None:
+    def _resolve_deadlocks(self, now: float) -> None:
         """Break each circle of vehicles waiting for each other: one goes round the others, or, where there is no way
         round (a station at the end of a spur, met head-on), steps aside to a free node off their way and comes back."""
         for cycle in self.traffic.deadlocks():
             for victim in sorted(cycle, reverse=True):
                 link = self.links.get(victim)
                 trip = link.trip if link is not None else None
-                if trip is None:
-                    continue
+                if trip is None or (trip.rerouted[1] == trip.passed and now - trip.rerouted[0] < REROUTE_PATIENCE):
+                    continue  # re-routed a moment ago and not moved since: give that a chance, or try another
                 others = [other for other in cycle if other != victim]
                 tail = self._detour(trip, others) or self._retreat(trip, others)
                 if tail is None:
                     continue
                 trip.route = trip.route[: trip.released + 1] + tail[1:]
                 trip.body = None
+                trip.rerouted = (now, trip.passed)
                 self.traffic.waits.pop(victim, None)
                 self.deadlocks_broken += 1
                 log.info("deadlock of %s broken: %s now goes %s", " ↔ ".join(cycle), victim, " ".join(tail))

@@ -35,7 +35,8 @@ class Trip:
     acknowledged_update: int = -1  # highest orderUpdateId a state confirmed
     resends: int = 0
     make_way: bool = False  # not the plant's goal: moving an idle vehicle out of another's way
-    old_errors: set[str] = field(default_factory=set)  # errors the vehicle reported before: not a rejection of this trip
+    old_errors: set[str] = field(default_factory=set)
+    rerouted: tuple[float, int] = (-math.inf, -1)  # when a deadlock re-routed it last, and where it was then  # errors the vehicle reported before: not a rejection of this trip
     done: bool = False
     failed: str = ""
 
