@@ -11,6 +11,7 @@ fails is not sent, and counted: `schema_violations` must stay 0).
 from __future__ import annotations
 
 import asyncio
+import collections
 import json
 import logging
 from typing import TYPE_CHECKING, Any
@@ -35,6 +36,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+TURN = 4  # messages read or sent between two looks at the scan's next release
 MAX_MESSAGE = 1024 * 1024  # bytes: a vehicle's state is a few kB; a bigger message is refused and shown as its error
 MAX_RECEIVED = 64 * 1024 * 1024  # bytes the connection hands on at all (beyond: dropped there, logged, not attributed)
 ROBOT_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "navreason", "route", "status", "xgoal", "ygoal", "online")
@@ -65,7 +67,8 @@ class VdaMaster:
         self._tasks: list[asyncio.Task[Any]] = []
         self._undo: list[Any] = []
         self._wire_log = PeerLog(log, service="VDA 5050")
-        self._wake = asyncio.Event()
+        self._inbox: collections.deque[tuple[str, bytes]] = collections.deque(maxlen=100_000)
+        self._mail = asyncio.Event()
 
     # -- adapter protocol ------------------------------------------------------------------------------
 
@@ -89,12 +92,12 @@ class VdaMaster:
                   Origin("vda5050", role=None))
         connection = self.connection = MqttConnection(self.mqtt, "vda5050", plant.clock, max_payload=MAX_RECEIVED)
         interface, version = self.settings.interface, self.settings.version
-        connection.subscribe(topics.vehicle_filter(interface, version, topics.STATE), self._on_message)
-        connection.subscribe(topics.vehicle_filter(interface, version, topics.CONNECTION), self._on_message, qos=1)
-        connection.subscribe(topics.vehicle_filter(interface, version, topics.FACTSHEET), self._on_message)
+        for name in (topics.STATE, topics.CONNECTION, topics.FACTSHEET):
+            connection.subscribe(topics.vehicle_filter(interface, version, name), self._receive, qos=1 if name == topics.CONNECTION else 0)
         self._undo.append(connection.on_state(self._on_broker))
         self._undo += register_commands(plant.commands, self)
-        self._tasks = [plant.spawn(connection.run(), "vda5050-mqtt"), plant.spawn(self._run(), "vda5050-master")]
+        self._tasks = [plant.spawn(connection.run(), "vda5050-mqtt"), plant.spawn(self._run(), "vda5050-master"),
+                       plant.spawn(self._read(), "vda5050-inbox")]
 
     async def stop(self) -> None:
         for task in self._tasks:
@@ -135,11 +138,35 @@ class VdaMaster:
             control.tick(clock.now())
             await self.flush()
 
+    def _receive(self, topic: str, payload: bytes, retained: bool) -> None:
+        """From the connection: queued, read in turns that let the scan go first (`_read`)."""
+        self._inbox.append((topic, payload))
+        self._mail.set()
+
+    async def _read(self) -> None:
+        """The vehicles' messages, a few at a time between scan cycles (a burst of states must not delay a 10 ms task)."""
+        assert self.plant is not None
+        clock, inbox = self.plant.clock, self._inbox
+        while True:
+            await self._mail.wait()
+            self._mail.clear()
+            while inbox:
+                await clock.sleep(0)  # on the real clock: a scan cycle due within its guard runs first
+                for _ in range(min(len(inbox), TURN)):
+                    topic, payload = inbox.popleft()
+                    try:
+                        self._on_message(topic, payload, False)
+                    except Exception:  # one message the master chokes on must not end its reading
+                        self.bad_messages += 1
+                        log.exception("vda5050: a message on %s could not be handled", topic)
+
     async def flush(self) -> None:
         """Publish what the control decided, each message checked against its closed schema first."""
         assert self.plant is not None and self.control is not None and self.connection is not None
         outbox, self.control.outbox = self.control.outbox, []
-        for link, name, body in outbox:
+        for index, (link, name, body) in enumerate(outbox):
+            if index % TURN == TURN - 1:
+                await self.plant.clock.sleep(0)  # a burst of orders in turns, scan cycles first
             message = {**link.headers.next(name, self.plant.clock.wall()), **body}
             found = problems("order" if name == topics.ORDER else "instantActions", self.settings.version, message)
             if found:

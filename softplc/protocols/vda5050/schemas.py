@@ -60,7 +60,7 @@ def _message(body_required: dict[str, Any], body_optional: dict[str, Any] | None
              optional_id_and_time: bool = False) -> dict[str, Any]:
     required, optional = _header(closed, optional_id_and_time=optional_id_and_time)
     schema = _object({**required, **body_required}, {**optional, **(body_optional or {})}, closed=closed)
-    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["$schema"] = "http://json-schema.org/draft-07/schema#"  # what fastjsonschema compiles (the keywords are draft-07's)
     return schema
 
 

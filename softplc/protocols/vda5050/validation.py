@@ -21,9 +21,18 @@ class MessageError(ValueError):
 
 @functools.cache
 def _validator(kind: str, version: str, closed: bool) -> Any:
-    from jsonschema import Draft202012Validator
+    """jsonschema's validator: slow (~3 ms a state here), used only to say what is wrong with a message that failed."""
+    from jsonschema import Draft7Validator
 
-    return Draft202012Validator(schema(kind, version, closed=closed))
+    return Draft7Validator(schema(kind, version, closed=closed))
+
+
+@functools.cache
+def _check(kind: str, version: str, closed: bool) -> Any:
+    """The schema compiled to Python by fastjsonschema (~0.07 ms a state): raises on the first problem."""
+    import fastjsonschema
+
+    return fastjsonschema.compile(schema(kind, version, closed=closed))
 
 
 def _where(path: Any) -> str:
@@ -52,6 +61,14 @@ def parse_json(payload: bytes | str) -> Any:
 
 def problems(kind: str, version: str, document: Any, *, closed: bool = True) -> list[str]:
     """Every problem of a message, 'path: what is wrong' ([] when valid); orders also get the graph rules."""
+    import fastjsonschema
+
+    try:
+        _check(kind, version, closed)(document)
+    except fastjsonschema.JsonSchemaException:
+        pass  # wrong somewhere: the slow validator below says where and why, every problem
+    else:
+        return order_problems(document) if kind == ORDER_KIND else []
     errors = sorted(_validator(kind, version, closed).iter_errors(document), key=lambda error: list(error.absolute_path))
     found = [f"{_where(error.absolute_path)}: {error.message}" for error in errors]
     if not found and kind == ORDER_KIND:
