@@ -14,6 +14,7 @@ import asyncio
 import collections
 import json
 import logging
+import time
 from typing import TYPE_CHECKING, Any
 
 from softplc.adapters.vda5050.commands import register_commands
@@ -36,7 +37,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-TURN = 4  # messages read or sent between two looks at the scan's next release
+TURN = 4  # orders sent between two looks at the scan's next release
+TURN_SECONDS = 0.001  # real seconds of reading the vehicles' messages between two looks at it
 MAX_MESSAGE = 1024 * 1024  # bytes: a vehicle's state is a few kB; a bigger message is refused and shown as its error
 MAX_RECEIVED = 64 * 1024 * 1024  # bytes the connection hands on at all (beyond: dropped there, logged, not attributed)
 ROBOT_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "navreason", "route", "status", "xgoal", "ygoal", "online")
@@ -67,7 +69,7 @@ class VdaMaster:
         self._tasks: list[asyncio.Task[Any]] = []
         self._undo: list[Any] = []
         self._wire_log = PeerLog(log, service="VDA 5050")
-        self._inbox: collections.deque[tuple[str, bytes]] = collections.deque(maxlen=100_000)
+        self._inbox: collections.deque[tuple[str, bytes, float]] = collections.deque(maxlen=100_000)
         self._mail = asyncio.Event()
 
     # -- adapter protocol ------------------------------------------------------------------------------
@@ -135,12 +137,13 @@ class VdaMaster:
         clock, control = self.plant.clock, self.control
         while True:
             await clock.sleep(self.settings.tick)
-            control.tick(clock.now())
+            control.tick(clock.now(), liveness=not self._inbox)
             await self.flush()
 
     def _receive(self, topic: str, payload: bytes, retained: bool) -> None:
-        """From the connection: queued, read in turns that let the scan go first (`_read`)."""
-        self._inbox.append((topic, payload))
+        """From the connection: queued with the time it came (liveness counts from then), read in turns (`_read`)."""
+        assert self.plant is not None
+        self._inbox.append((topic, payload, self.plant.clock.now()))
         self._mail.set()
 
     async def _read(self) -> None:
@@ -152,10 +155,11 @@ class VdaMaster:
             self._mail.clear()
             while inbox:
                 await clock.sleep(0)  # on the real clock: a scan cycle due within its guard runs first
-                for _ in range(min(len(inbox), TURN)):
-                    topic, payload = inbox.popleft()
+                began = time.perf_counter()
+                while inbox and time.perf_counter() - began < TURN_SECONDS:
+                    topic, payload, received = inbox.popleft()
                     try:
-                        self._on_message(topic, payload, False)
+                        self._on_message(topic, payload, received)
                     except Exception:  # one message the master chokes on must not end its reading
                         self.bad_messages += 1
                         log.exception("vda5050: a message on %s could not be handled", topic)
@@ -192,7 +196,7 @@ class VdaMaster:
         if up:
             log.info("vda5050: connected to %s; subscribed to the vehicles' state, connection and factsheet", self.mqtt.url)
 
-    def _on_message(self, topic: str, payload: bytes, retained: bool) -> None:
+    def _on_message(self, topic: str, payload: bytes, received: float) -> None:
         assert self.plant is not None and self.control is not None
         address = topics.parse(topic, self.settings.interface, self.settings.version)
         if address is None:
@@ -222,7 +226,7 @@ class VdaMaster:
             self._bad(link, address.name, f"the message on {link.id}'s topic says it is from {message['manufacturer']}/"
                                           f"{message['serialNumber']}")
             return
-        now = self.plant.clock.now()
+        now = received
         if address.name == topics.STATE:
             state = VehicleState.from_message(message)
             if state.position is not None and state.map_id and state.map_id != self.roadmap.map_id:

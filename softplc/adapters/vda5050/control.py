@@ -61,6 +61,8 @@ class MasterControl:
                 link.write(navstate="idle", navreason="")  # back: it takes trips again
             here = link.here(self.roadmap)
             if here and link.trip is None:
+                # What it held while away (it may have driven its base meanwhile) goes; where it stands now stays.
+                self.traffic.release_all(link.id)
                 self.traffic.stand(link.id, here)
             if link.factsheet is None and not link.factsheet_requested:  # vda-5050-lib sends one only when asked
                 link.factsheet_requested = True
@@ -90,8 +92,9 @@ class MasterControl:
         if trip is not None:
             link.previous_orders.add(trip.order_id)
             link.trip = None
-            here = link.here(self.roadmap)
-            self.traffic.release_all(link.id, keep_node=here or None)  # it still stands somewhere: nobody drives into it
+            # Its reservations stay: a vehicle out of reach drives on to the end of its base (spec §6.2), and nobody
+            # may drive into where it might be. They go when it reports again, from where it then stands.
+            self.traffic.waits.pop(link.id, None)
             if not trip.make_way:
                 log.warning("vehicle %s lost on its way to (%g, %g): its task goes back to the dispatcher", link.id, *trip.goal)
                 resets = {"status": False, "currloc": 0, "tcurr": 0}
@@ -109,9 +112,10 @@ class MasterControl:
 
     # -- each tick -----------------------------------------------------------------------------------------------
 
-    def tick(self, now: float) -> None:
+    def tick(self, now: float, *, liveness: bool = True) -> None:
+        """Liveness (unless states wait unread: they may be fresh), goals, traffic, and what to send."""
         for link in self.links.values():
-            if link.alive and now - link.last_state_at > self.settings.lost_after:
+            if liveness and link.alive and now - link.last_state_at > self.settings.lost_after:
                 self.lose(link, f"no state for {self.settings.lost_after:g} s")
             if link.alive:
                 self._goal(link, now)
