@@ -230,12 +230,16 @@ async def run(args: argparse.Namespace) -> dict[str, float]:
 
 
 def main() -> None:
+    import logging
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--vehicles", type=int, default=100)
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--log", default="vda5050-fleet.log", metavar="FILE", help="the runtime's log lines (default vda5050-fleet.log)")
     args = parser.parse_args()
-    print(f"load average before: {load_average()}")
+    logging.basicConfig(filename=args.log, level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    print(f"load average before: {load_average()}; the runtime's log in {args.log}")
     result = asyncio.run(run(args))
     print(f"{args.vehicles} vda-5050-lib vehicles on mosquitto, {args.seconds:g} s of random goals (load average after: {load_average()})")
     print(f"  orders {result['orders']}, acknowledged by a state {result['acknowledged']}; order -> acknowledging state "

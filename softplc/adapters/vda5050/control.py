@@ -85,9 +85,9 @@ class MasterControl:
         if connection_state in ("CONNECTIONBROKEN", "OFFLINE") and link.alive:
             self.lose(link, f"connection {connection_state}")
 
-    def lose(self, link: VehicleLink, why: str) -> None:
-        """A vehicle gone quiet: BAD tags; its trip ends, and its task goes back to the dispatcher."""
-        link.go_offline(why)
+    def lose(self, link: VehicleLink, why: str, *, quiet: bool = False) -> None:
+        """A vehicle gone quiet: BAD tags; its trip ends, and its task goes back to the dispatcher (`quiet`: no log line)."""
+        link.go_offline(why, quiet=quiet)
         trip = link.trip
         if trip is not None:
             link.previous_orders.add(trip.order_id)
@@ -96,7 +96,8 @@ class MasterControl:
             # may drive into where it might be. They go when it reports again, from where it then stands.
             self.traffic.waits.pop(link.id, None)
             if not trip.make_way:
-                log.warning("vehicle %s lost on its way to (%g, %g): its task goes back to the dispatcher", link.id, *trip.goal)
+                if not quiet:
+                    log.warning("vehicle %s lost on its way to (%g, %g): its task goes back to the dispatcher", link.id, *trip.goal)
                 resets = {"status": False, "currloc": 0, "tcurr": 0}
                 link.write(**{key: value for key, value in resets.items() if f"{link.id}_{key}" in self.db})
             link.show_trip()
@@ -104,11 +105,12 @@ class MasterControl:
     def broker(self, up: bool) -> None:
         self.broker_up = up
         if not up:
+            alive = [link for link in self.links.values() if link.alive]
             for link in self.links.values():
-                if link.alive:
-                    self.lose(link, "the MQTT broker is unreachable")
-                else:
-                    link.go_offline("the MQTT broker is unreachable")
+                self.lose(link, "the MQTT broker is unreachable", quiet=True)  # one line for all of them
+            if alive:
+                log.warning("vda5050: the MQTT broker is unreachable: %d vehicles out of reach, their tags BAD and the tasks of "
+                            "those on a trip given back to the dispatcher", len(alive))
 
     # -- each tick -----------------------------------------------------------------------------------------------
 
@@ -354,7 +356,8 @@ class MasterControl:
         if not link.cancel_id:
             self._orders += 1
             link.cancel_id = f"{link.id}.{self.session}.cancel.{self._orders}"
-            log.warning("vehicle %s is busy with order %r of another master: cancelling it", link.id, link.state.order_id if link.state else "")
+            log.warning("vehicle %s is still busy with order %r, not its current one (a previous master's, or one given up while "
+                        "it was out of reach): cancelling it", link.id, link.state.order_id if link.state else "")
             self.outbox.append((link, topics.INSTANT_ACTIONS, {"actions": [action("cancelOrder", link.cancel_id, "HARD")]}))
 
     def instant(self, link: VehicleLink, an_action: dict[str, Any]) -> None:

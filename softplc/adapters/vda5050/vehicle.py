@@ -70,9 +70,9 @@ class VehicleLink:
                 if rejected is not None:
                     log.warning("vehicle %s: %s", self.id, rejected)
 
-    def go_offline(self, why: str) -> None:
+    def go_offline(self, why: str, *, quiet: bool = False) -> None:
         """Lost (no fresh state, connection broken, broker gone): pose tags BAD, online false, navstate offline."""
-        if self.alive:
+        if self.alive and not quiet:
             log.warning("VDA 5050 vehicle %s (%s/%s) is lost: %s; its tags are BAD until it reports again", self.id,
                         self.identity.manufacturer, self.identity.serial_number, why)
         self.alive = False
