@@ -115,6 +115,8 @@ class VdaMaster:
         for undo in self._undo:
             undo()
         self._undo.clear()
+        if self.control is not None:
+            self.control.close()
 
     def describe(self) -> str:
         return (f"VDA 5050 {self.settings.version} master control of {len(self.vehicles)} vehicles on {self.mqtt.url} "

@@ -16,6 +16,7 @@ import math
 import uuid
 from typing import Any
 
+from softplc.adapters.vda5050 import passing
 from softplc.adapters.vda5050.orders import Trip, load_actions
 from softplc.adapters.vda5050.settings import VdaSettings
 from softplc.adapters.vda5050.traffic import Reservations
@@ -47,6 +48,19 @@ class MasterControl:
         self._orders = 0
         self.deadlocks_broken = 0
         self.broker_up = False
+        self.waiting_since: dict[str, tuple[str, float]] = {}  # vehicle → (what it waits for, since when)
+        self.moved_aside: dict[str, float] = {}  # idle vehicle → when it was last sent aside
+        # Goals are looked at when their tags change (and when a vehicle comes back), not every tick for every vehicle.
+        self.touched: set[str] = set(links)
+        self._goal_tags = {f"{name}_{tag}": name for name in links for tag in ("xgoal", "ygoal", "status")}
+        self.close = db.on_change(self._changed)
+
+    def _changed(self, tags: Any) -> None:
+        goal_tags = self._goal_tags
+        for tag in tags:
+            name = goal_tags.get(tag.name)
+            if name is not None:
+                self.touched.add(name)
 
     # -- what vehicles say ---------------------------------------------------------------------------------
 
@@ -57,6 +71,7 @@ class MasterControl:
         if not link.alive:
             link.alive = True
             log.info("VDA 5050 vehicle %s (%s/%s) reports", link.id, link.identity.manufacturer, link.identity.serial_number)
+            self.touched.add(link.id)  # a goal written while it was away is taken up now
             if link.trip is None:
                 link.write(navstate="idle", navreason="")  # back: it takes trips again
             here = link.here(self.roadmap)
@@ -119,11 +134,16 @@ class MasterControl:
         for link in self.links.values():
             if liveness and link.alive and now - link.last_state_at > self.settings.lost_after:
                 self.lose(link, f"no state for {self.settings.lost_after:g} s")
+        touched, self.touched = self.touched, set()
+        for name in touched:
+            link = self.links[name]
             if link.alive:
                 self._goal(link, now)
-        self._release()
-        self._resolve_deadlocks(now)
-        self._make_way()
+            else:
+                self.touched.add(name)  # taken up when it reports
+        passing.grow_bases(self)
+        passing.resolve_deadlocks(self, now)
+        passing.make_way(self, now)
         for link in self.links.values():
             if link.alive and link.trip is not None:
                 self._send(link, link.trip, now)
@@ -148,6 +168,7 @@ class MasterControl:
         if link.busy_with_foreign_order():
             self._cancel(link, now)  # once; the goal is taken up again when the vehicle is free
             link.goal = (math.nan, math.nan)
+            self.touched.add(link.id)
             return
         goal_node = self.roadmap.nearest(*goal).id
         trip = link.trip
@@ -250,92 +271,6 @@ class MasterControl:
         self.traffic.release_all(link.id, keep_node=link.here(self.roadmap) or None)
         link.write(status=False, navstate="failed", navreason=why[:300], **({"_rejected": why} if rejected else {}))
         link.show_trip()
-
-    # -- traffic -------------------------------------------------------------------------------------------------------
-
-    def _release(self) -> None:
-        for link in self.links.values():
-            trip = link.trip
-            if trip is None or not link.alive:
-                continue
-            state = link.state
-            position = trip.position(state.last_node_id, state.last_node_sequence_id) if state is not None and \
-                state.order_id == trip.order_id else 0
-            released = self.traffic.extend(link.id, trip.route, trip.released, max(position, 0), self.settings.lookahead)
-            if released != trip.released:
-                trip.released = released
-                trip.body = None  # an update is due
-                link.show_trip()
-
-    def _resolve_deadlocks(self, now: float) -> None:
-        """Break each circle of vehicles waiting for each other: one goes round the others, or, where there is no way
-        round (a station at the end of a spur, met head-on), steps aside to a free node off their way and comes back."""
-        for cycle in self.traffic.deadlocks():
-            for victim in sorted(cycle, reverse=True):
-                link = self.links.get(victim)
-                trip = link.trip if link is not None else None
-                if trip is None or (trip.rerouted[1] == trip.passed and now - trip.rerouted[0] < REROUTE_PATIENCE):
-                    continue  # re-routed a moment ago and not moved since: give that a chance, or try another
-                others = [other for other in cycle if other != victim]
-                tail = self._detour(trip, others) or self._retreat(trip, others)
-                if tail is None:
-                    continue
-                trip.route = trip.route[: trip.released + 1] + tail[1:]
-                trip.body = None
-                trip.rerouted = (now, trip.passed)
-                self.traffic.waits.pop(victim, None)
-                self.deadlocks_broken += 1
-                log.info("deadlock of %s broken: %s now goes %s", " ↔ ".join(cycle), victim, " ".join(tail))
-                break
-            else:
-                for name in cycle:
-                    if name in self.links:
-                        self.links[name].write(navreason=f"deadlock with {', '.join(o for o in cycle if o != name)}: no way round")
-
-    def _detour(self, trip: Trip, others: list[str]) -> list[str] | None:
-        """A way from the decision point to the goal round the nodes the others hold; None if none, or no different one."""
-        blocked = set().union(*(self.traffic.nodes_of(other) for other in others))
-        tail = self.roadmap.route(trip.route[trip.released], trip.goal_node, avoid=frozenset(blocked))
-        return tail if tail is not None and tail != trip.route[trip.released:] else None
-
-    def _retreat(self, trip: Trip, others: list[str]) -> list[str] | None:
-        """To the nearest free node off the others' ways, then on to the goal (a passing place)."""
-        their_ways: set[str] = set()
-        for other in others:
-            other_trip = self.links[other].trip if other in self.links else None
-            if other_trip is not None:
-                their_ways.update(other_trip.route[other_trip.passed:])
-        held = self.traffic.holder_nodes()
-        here = trip.route[trip.released]
-        origin = self.roadmap.nodes[here]
-        candidates = sorted((node for node in self.roadmap.nodes.values() if node.id not in their_ways and node.id not in held),
-                            key=lambda node: math.hypot(node.x - origin.x, node.y - origin.y))
-        for refuge in candidates[:8]:
-            there = self.roadmap.route(here, refuge.id, avoid=frozenset(held - {here}))
-            back = self.roadmap.route(refuge.id, trip.goal_node)
-            if there is not None and back is not None:
-                return there + back[1:]
-        return None
-
-    def _make_way(self) -> None:
-        if not self.settings.make_way:
-            return
-        for name, wait in list(self.traffic.waits.items()):
-            blocker = self.links.get(wait.holder)
-            waiting = self.links.get(name)
-            if blocker is None or waiting is None or waiting.trip is None or not blocker.alive or blocker.trip is not None:
-                continue
-            if bool(self.db.value(f"{blocker.id}_status")) or (f"{blocker.id}_currloc" in self.db and self.db.value(f"{blocker.id}_currloc")):
-                continue  # busy in the plant (loading, unloading): it stays
-            here = blocker.here(self.roadmap)
-            keep_clear = set(waiting.trip.route) | set(self.traffic.holder_nodes())
-            refuges = sorted((node for node in self.roadmap.nodes.values() if node.id not in keep_clear),
-                             key=lambda node: math.dist((node.x, node.y), (self.roadmap.nodes[here].x, self.roadmap.nodes[here].y)))
-            for refuge in refuges[:5]:
-                if self.roadmap.route(here, refuge.id, avoid=frozenset(self.traffic.holder_nodes()) - {here}) is not None:
-                    log.info("%s waits for %s, which stands idle at %s: sending it aside to %s", name, blocker.id, here, refuge.id)
-                    self.start(blocker, (refuge.x, refuge.y), 0.0, make_way=True)
-                    break
 
     # -- sending -------------------------------------------------------------------------------------------------------
 
