@@ -98,7 +98,7 @@ def write_plant(directory: Path, vehicles: int, url: str, rng: random.Random) ->
                 bind: {{items: items, capacity: capacity, fill_rate: rate, level: level}}
         fleet: {{enabled: false, robots: robots.yaml, map: {REPO / "robots" / "maps" / "factory.yaml"}}}
         mqtt: {{url: "{url}", keepalive: 5s}}
-        vda5050: {{roadmap: roadmap.yaml, lost_after: {2 * STATE_INTERVAL}s, ack_timeout: 1s, tick: 50ms}}
+        vda5050: {{roadmap: roadmap.yaml, lost_after: {2 * STATE_INTERVAL - 0.1:g}s, ack_timeout: 1s, tick: 50ms}}
         servers: {{opcua: {{enabled: false}}, modbus: {{enabled: false}}, hmi: {{enabled: false}}}}
         """))
     return starts
@@ -208,6 +208,8 @@ async def run(args: argparse.Namespace) -> dict[str, float]:
         last = f"v{args.vehicles:03d}"
         os.kill(frozen.pid, signal.SIGSTOP)
         result["flagged_s"] = await until(lambda: not db.value(f"{last}_online"), 30) or float("nan")
+        # The goal's measure: from its last state (the clock's time it came) to the master flagging it.
+        result["silence_s"] = runtime.clock.now() - master.links[last].last_state_at
         os.kill(frozen.pid, signal.SIGCONT)
         # The broker restarts: from its return to the master subscribed again and hearing the vehicles.
         broker.stop()
@@ -246,14 +248,17 @@ def main() -> None:
           f"p50 {result['p50']:.1f} ms, p95 {result['p95']:.1f} ms, p99 {result['p99']:.1f} ms")
     print(f"  10 ms task start latency p99 {result['task_p99']:.3f} ms, max {result['task_max']:.3f} ms")
     print(f"  schema violations {result['violations']}, reservation conflicts {result['conflicts']}, deadlocks broken {result['deadlocks']}")
-    print(f"  a frozen vehicle (state every {STATE_INTERVAL:g} s) flagged after {result['flagged_s']:.2f} s; "
+    print(f"  a frozen vehicle (state every {STATE_INTERVAL:g} s) flagged {result['silence_s']:.2f} s after its last state "
+          f"({result['flagged_s']:.2f} s after it froze); "
           f"after a broker restart subscribed again and hearing vehicles in {result['resubscribed_s']:.2f} s")
     goals = [
-        ("order -> acknowledging state p95 <= 100 ms", result["p95"] <= 100 or args.vehicles > 100),
+        ("order -> acknowledging state p95 <= 100 ms" + (" (the goal is set for 100 vehicles)" if args.vehicles > 100 else ""),
+         result["p95"] <= 100),
         ("10 ms task p99 start latency <= 1 ms", result["task_p99"] <= 1.0),
         ("0 schema violations", result["violations"] == 0),
         ("re-subscribed <= 5 s after the broker returns", result["resubscribed_s"] <= 5.0),
-        (f"a lost vehicle flagged <= {2 * STATE_INTERVAL:g} s (2x its state interval)", result["flagged_s"] <= 2 * STATE_INTERVAL),
+        (f"a lost vehicle flagged <= {2 * STATE_INTERVAL:g} s (2x its state interval) after its last state",
+         result["silence_s"] <= 2 * STATE_INTERVAL),
     ]
     for text, met in goals:
         print(f"{text}: {'met' if met else 'GOAL MISSED'}")
