@@ -20,6 +20,9 @@ Beyond the thesis: with `park_after` > 0, a robot left without a task (`tnext` 0
 long drives back to where it started, so it does not stand on a station other robots need
 (the thesis's dispatchers always had a task for every robot). A task arriving meanwhile
 takes over at once.
+
+With `navstate` bound (rNN_navstate), a robot whose driver reports it `offline` (a VDA 5050
+vehicle the master control lost, which gave its task back) takes no new trip until it is back.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ class MotionSequencer(Program):
     dest_x = Input("destination x of every task (tNN_dest_x)")
     dest_y = Input("destination y of every task (tNN_dest_y)")
     goals = InOut("goals issued per task, counted here (tNN_goals)", optional=True)
+    navstate = Input("the driver's navigation state (rNN_navstate): offline robots take no new trip", optional=True)
     retry_after = Param(10.0, "seconds before a trip the robot gave up on is asked again", duration=True)
     park_after = Param(0.0, "seconds without a task before the robot drives back to its start (0: never)", duration=True)
 
@@ -71,8 +75,8 @@ class MotionSequencer(Program):
         if self.gave_up(IN=failed, PT=self.retry_after):
             self.status = True  # ask again: the robot retries the same goal
             return
-        if not available:
-            return  # travelling (or waiting to retry)
+        if not available or (self.navstate == "offline" and self.currloc == WAITING):
+            return  # travelling (or waiting to retry), or away
         before = self.currloc
         if self.currloc == WAITING:
             task = self.tnext

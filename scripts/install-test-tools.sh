@@ -48,3 +48,8 @@ if [ ! -x tests/sparkplug/.venv/bin/python ] || ! tests/sparkplug/.venv/bin/pyth
       && tests/sparkplug/.venv/bin/pip install --quiet --disable-pip-version-check pysparkplug==0.6.1 paho-mqtt==1.6.1; } \
     || echo "warning: could not make tests/sparkplug/.venv (pysparkplug); the Sparkplug host tests will say so" >&2
 fi
+# The VDA 5050 tests drive vda-5050-lib's virtual vehicles (tests/vda5050_node/vehicles.js), a counterpart nobody here wrote.
+if command -v npm >/dev/null 2>&1 && [ ! -d tests/vda5050_node/node_modules/vda-5050-lib ] && [ -f tests/vda5050_node/package.json ]; then
+  (cd tests/vda5050_node && npm ci --silent --no-audit --no-fund >/dev/null 2>&1) \
+    || echo "warning: npm ci in tests/vda5050_node failed; the VDA 5050 tests with vda-5050-lib will say so" >&2
+fi

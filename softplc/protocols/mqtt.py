@@ -170,7 +170,8 @@ class MqttConnection:
             protocol=protocol, keepalive=max(1, round(settings.keepalive)), tls_context=self._tls_context(),
             will=aiomqtt.Will(will.topic, will.payload, will.qos, will.retain) if will is not None else None,
             clean_session=self.clean_start if protocol == aiomqtt.ProtocolVersion.V311 else None,
-            clean_start=True if self.clean_start else 3,  # paho's MQTT_CLEAN_START_FIRST_ONLY is 3
+            # paho's MQTT_CLEAN_START_FIRST_ONLY (3) is its default, and the only value it accepts outside MQTT 5.
+            clean_start=True if self.clean_start and protocol == aiomqtt.ProtocolVersion.V5 else 3,
             timeout=10.0,
         )
         async with client:

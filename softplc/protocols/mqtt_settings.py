@@ -7,7 +7,9 @@
       password_file: mqtt.password      # the password's first line; relative to the plant file
       tls: {ca_file: ca.pem, cert_file: client.pem, key_file: client.key, verify: true}
       keepalive: 15s
-      protocol: "5"                     # "3.1.1" or "5" (default 5)
+      protocol: "5"                     # "3.1.1" or "5" (default 5; 3.1.1 with embedded)
+      embedded: true                    # the runtime starts a broker itself at the url (amqtt): a laptop demo,
+                                        # NOT for production (no TLS, no users, no ACLs; loopback only)
 
 Each user opens its own connection with these settings (each has its own last will). Nothing
 here imports an MQTT library; `softplc.protocols.mqtt` makes the connection.
@@ -50,7 +52,9 @@ SCHEMA: dict[str, Any] = {
             "additionalProperties": False,
         },
         "keepalive": {"type": ["string", "number"], "description": "Keep-alive interval, e.g. 15s (default 15s)."},
-        "protocol": {"enum": list(PROTOCOLS), "description": "MQTT protocol version (default 5)."},
+        "protocol": {"enum": list(PROTOCOLS), "description": "MQTT protocol version (default 5; 3.1.1 with embedded)."},
+        "embedded": {"type": "boolean", "description": "Start a broker (amqtt) inside the runtime at the url: for a laptop "
+                     "demo, NOT for production (no TLS, no users, no ACLs; loopback only). Default false."},
     },
     "additionalProperties": False,
 }
@@ -76,6 +80,7 @@ class MqttSettings:
     tls: TlsSettings | None = None
     keepalive: float = 15.0
     protocol: str = "5"
+    embedded: bool = False  # the runtime runs the broker itself (softplc/adapters/mqtt/broker.py): demos only
 
     @property
     def url(self) -> str:
@@ -112,7 +117,8 @@ class MqttSettings:
             password_file=config.base_dir / password_file if password_file else None,
             tls=tls,
             keepalive=parse_duration(section.get("keepalive", "15s")),
-            protocol=str(section.get("protocol", "5")),
+            protocol=str(section.get("protocol", "3.1.1" if section.get("embedded") else "5")),
+            embedded=bool(section.get("embedded", False)),
         )
 
 
@@ -145,6 +151,15 @@ def problems(config: PlantConfig) -> list[Problem]:
         else:
             if not 1 <= seconds <= 65535:
                 at(("keepalive",), f"keepalive must be between 1 s and 65535 s, not {seconds:g} s")
+    if section.get("embedded"):
+        url = urlparse(str(section.get("url", "mqtt://127.0.0.1:1883")))
+        if url.scheme == "mqtts" or section.get("tls") is not None:
+            at(("embedded",), "the embedded broker has no TLS: use mqtt:// and no tls:, or a real broker (docs/vda5050.md)")
+        elif url.hostname not in ("127.0.0.1", "localhost", "::1"):
+            at(("embedded",), f"the embedded broker serves this computer only (loopback), not {url.hostname}: it has no users "
+                              "or ACLs; run mosquitto for a network (docs/vda5050.md)")
+        if str(section.get("protocol", "3.1.1")) == "5":
+            at(("protocol",), "the embedded broker (amqtt) speaks MQTT 3.1.1 only: protocol: \"3.1.1\"")
     files = [(("password_file",), section.get("password_file"))]
     tls = section.get("tls")
     if isinstance(tls, dict):

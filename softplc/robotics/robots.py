@@ -31,10 +31,11 @@ class Hardware(enum.Enum):
 
 
 class DriverKind(enum.Enum):
-    """How a robot is driven: inside the runtime (`sim`) or by its own agent process (`remote`)."""
+    """How a robot is driven: inside the runtime (`sim`), by its own agent process (`remote`), or as a VDA 5050 vehicle."""
 
     SIM = "sim"
     REMOTE = "remote"
+    VDA5050 = "vda5050"  # a vehicle the VDA 5050 master control drives over MQTT (softplc/adapters/vda5050)
 
 
 HARDWARE_NAMES = [item.value for item in Hardware]
@@ -56,6 +57,15 @@ class Point:
 
 
 @dataclass(frozen=True)
+class VehicleIdentity:
+    """How a VDA 5050 vehicle is addressed: its topics are …/MANUFACTURER/SERIAL_NUMBER/…"""
+
+    manufacturer: str
+    serial_number: str
+    instant_actions_key: str = "actions"  # "instantActions" for vda-5050-lib's 2.0 vehicles (a 2020 draft's key)
+
+
+@dataclass(frozen=True)
 class RobotSpec:
     """One robot as configured."""
 
@@ -71,6 +81,7 @@ class RobotSpec:
     start: Pose
     driver: DriverKind = DriverKind.SIM
     address: str = ""
+    vehicle: VehicleIdentity | None = None  # driver: vda5050 only
 
     @property
     def radius(self) -> float:
@@ -176,7 +187,20 @@ ROBOT_SCHEMA: dict[str, Any] = {
         "id": {"type": "string", "pattern": NAME_PATTERN, "description": "Tag prefix, e.g. r01."},
         "name": {"type": "string"},
         "address": {"type": "string", "description": "Network address (informational; remote robots register themselves)."},
-        "driver": {"enum": [kind.value for kind in DriverKind], "description": "sim: in-process; remote: robot-agent over OPC UA."},
+        "driver": {"enum": [kind.value for kind in DriverKind],
+                   "description": "sim: in-process; remote: robot-agent over OPC UA; vda5050: a VDA 5050 vehicle over MQTT."},
+        "vda5050": {
+            "type": "object",
+            "description": "driver: vda5050 only: the vehicle's topic names (docs/vda5050.md).",
+            "properties": {
+                "manufacturer": {"type": "string", "pattern": r"^[A-Za-z0-9_.:-]+$"},
+                "serial_number": {"type": "string", "pattern": r"^[A-Za-z0-9_.:-]+$"},
+                "instant_actions_key": {"enum": ["actions", "instantActions"],
+                                        "description": "instantActions for vda-5050-lib's 2.0 vehicles (default actions)."},
+            },
+            "required": ["manufacturer", "serial_number"],
+            "additionalProperties": False,
+        },
         "length_mm": _POSITIVE,
         "width_mm": _POSITIVE,
         "height_mm": _POSITIVE,
@@ -277,13 +301,34 @@ def _duplicate_ids(items: Sequence[dict[str, Any]], key: str, source: SourceMap)
     return problems
 
 
+def _vehicle_problems(items: Sequence[dict[str, Any]], source: SourceMap) -> list[Problem]:
+    """A VDA 5050 vehicle needs its topic names, no other robot has them, and no two vehicles share them."""
+    problems = []
+    seen: dict[tuple[str, str], str] = {}
+    for index, item in enumerate(items):
+        vehicle = item.get("vda5050")
+        if item.get("driver") == DriverKind.VDA5050.value and vehicle is None:
+            problems.append(source.problem(("robots", index, "driver"), f"robot {item['id']} is a VDA 5050 vehicle: it needs "
+                                           "'vda5050: {manufacturer: ..., serial_number: ...}'"))
+        elif vehicle is not None and item.get("driver") != DriverKind.VDA5050.value:
+            problems.append(source.problem(("robots", index, "vda5050"), f"robot {item['id']} has a vda5050: section but "
+                                           f"'driver: {item.get('driver', 'sim')}' (say 'driver: vda5050')", at_key=True))
+        elif vehicle is not None:
+            key = (vehicle["manufacturer"], vehicle["serial_number"])
+            if key in seen:
+                problems.append(source.problem(("robots", index, "vda5050", "serial_number"),
+                                               f"vehicle {key[0]}/{key[1]} is robot {seen[key]} already"))
+            seen.setdefault(key, item["id"])
+    return problems
+
+
 def _hardware(names: Sequence[str]) -> frozenset[Hardware]:
     return frozenset(Hardware(name) for name in names)
 
 
 def _robots_from(path: Path, data: Any, source: SourceMap) -> RobotFile:
     items = _check_structure(data, source, ROBOTS_FILE_SCHEMA, "robots")
-    problems = _duplicate_ids(items, "robots", source)
+    problems = _duplicate_ids(items, "robots", source) + _vehicle_problems(items, source)
     if problems:
         raise ConfigError(problems)
     robots = []
@@ -304,6 +349,8 @@ def _robots_from(path: Path, data: Any, source: SourceMap) -> RobotFile:
                 start=Pose(float(start["x"]), float(start["y"]), float(start.get("heading", 0.0))),
                 driver=DriverKind(item.get("driver", "sim")),
                 address=item.get("address", ""),
+                vehicle=VehicleIdentity(item["vda5050"]["manufacturer"], item["vda5050"]["serial_number"],
+                                        item["vda5050"].get("instant_actions_key", "actions")) if "vda5050" in item else None,
             )
         )
         paths[item["id"]] = ("robots", index)

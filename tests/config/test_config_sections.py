@@ -85,7 +85,7 @@ def test_every_owner_module_is_light_to_import() -> None:
 def test_the_existing_owners_are_registered_with_their_sections_and_keys() -> None:
     paths = [section.path for section in sections.registered()]
     # the runtime's, then each adapter's in start order (softplc/config/manifest.py)
-    assert paths == [("runtime",), ("redundancy",), ("audit",), ("alarms",), ("mqtt",), ("fleet",), ("history",), ("links",), ("servers", "opcua"),
+    assert paths == [("runtime",), ("redundancy",), ("audit",), ("alarms",), ("mqtt",), ("fleet",), ("vda5050",), ("history",), ("links",), ("servers", "opcua"),
                      ("servers", "modbus"), ("sparkplug",), ("servers", "hmi"), ("hmi",)]
     assert set(sections.tag_keys()) == {"modbus", "history", "link"}
     properties = sections.config_schema()["properties"]
@@ -113,7 +113,7 @@ def test_without_its_owner_the_keys_are_unknown(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as caught:
         load_config(path)
     top, tag = [str(p) for p in caught.value.problems]
-    assert top.startswith(f"{path}:2:1: unknown key 'notebook'; expected one of: version, plant, templates, tags, tasks, runtime, redundancy, audit, alarms, mqtt, fleet")
+    assert top.startswith(f"{path}:2:1: unknown key 'notebook'; expected one of: version, plant, templates, tags, tasks, runtime, redundancy, audit, alarms, mqtt, fleet, vda5050")
     assert tag.startswith(f"{path}:4:22: unknown key 'notebook'; expected one of: type, initial, unit, description, access, min, max, retain, group, shared_output, history")
     assert "notebook" not in top.split("expected one of:")[1] and "notebook" not in tag.split("expected one of:")[1]
 

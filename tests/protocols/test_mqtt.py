@@ -117,3 +117,18 @@ async def test_a_restart_reconnects_at_once_without_the_will_and_asks_for_a_new_
             task.cancel()
         await node.close()
         await watcher.close()
+
+
+async def test_mqtt_3_1_1_connects(mosquitto) -> None:
+    """protocol: "3.1.1" (what the embedded broker speaks): paho refuses a clean_start flag outside MQTT 5."""
+    connection = MqttConnection(MqttSettings(port=mosquitto.port, protocol="3.1.1"), "old", RealClock())
+    received: list[bytes] = []
+    connection.subscribe("old/#", lambda topic, payload, retained: received.append(payload))
+    task = asyncio.create_task(connection.run())
+    try:
+        await until(lambda: connection.connected, what="connected with MQTT 3.1.1")
+        await connection.publish("old/x", b"1", qos=1)
+        await until(lambda: received == [b"1"], what="a message back")
+    finally:
+        task.cancel()
+        await connection.close()

@@ -160,7 +160,8 @@ export class RobotList {
       const tags = row.robot.tags;
       const quality = this.live.get(tags.xpos);
       const online = tags.online ? value(tags.online) !== false : true;
-      const offline = (quality && quality.q === 2) || (row.robot.driver === 'remote' && !online);
+      const away = row.robot.driver === 'remote' || row.robot.driver === 'vda5050';  // robots that report, and can stop
+      const offline = (quality && quality.q === 2) || (away && !online);
       const navstate = offline ? 'offline' : (value(tags.navstate) || 'idle');
       row.state.className = `chip ${NAVSTATE_CLASS[navstate] || 'idle'}`;
       setText(row.state, navstate);
@@ -171,7 +172,7 @@ export class RobotList {
       else parts.push('no task');
       if (typeof value(tags.load) === 'number') parts.push(`load ${value(tags.load)}/${value(tags.loadcap) ?? row.robot.load_capacity}`);
       if (typeof value(tags.speed) === 'number') parts.push(formatWithUnit(value(tags.speed), 'm/s', 2));
-      if (row.robot.driver === 'remote') parts.push(online ? 'remote, online' : 'remote, OFFLINE');
+      if (away) parts.push(`${row.robot.driver === 'remote' ? 'remote' : 'VDA 5050'}, ${online ? 'online' : 'OFFLINE'}`);
       const reason = value(tags.navreason);
       if (reason && (navstate === 'blocked' || navstate === 'failed')) parts.push(reason);
       setText(row.line2, parts.join(' · '));

@@ -140,7 +140,8 @@ export class Floor {
         if (!marker.shown) marker.shown = { ...marker.target };
       }
       const quality = live.get(tags.xpos);
-      const online = marker.robot.driver === 'remote' && tags.online ? value(tags.online) !== false : true;
+      const reporting = marker.robot.driver === 'remote' || marker.robot.driver === 'vda5050';  // robots that can be away
+      const online = reporting && tags.online ? value(tags.online) !== false : true;
       const offline = (quality && quality.q === 2) || !online;
       marker.node.classList.toggle('offline', offline);
       marker.tag.classList.toggle('offline', offline);

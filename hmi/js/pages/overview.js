@@ -7,6 +7,7 @@ import { get, tagsWithPrefix } from '../api.js';
 import { formatWithUnit, qualityClass } from '../format.js';
 import { Floor } from '../overview/floor.js';
 import { TaskCards, RobotList } from '../overview/cards.js';
+import { vda5050Layer } from '../overview/vda5050.js';
 
 export async function mount(root, ctx) {
   const plant = await get('/api/plant');
@@ -14,11 +15,14 @@ export async function mount(root, ctx) {
   return mountGroups(root, ctx, plant);
 }
 
-function mountFleet(root, ctx, plant) {
+const DRIVERS = { remote: 'remote robot agent', vda5050: 'VDA 5050 vehicle (MQTT)', sim: 'simulated in the runtime' };
+
+async function mountFleet(root, ctx, plant) {
   const fleet = plant.fleet;
   const openRobot = async (robot) => {
     const tags = await tagsWithPrefix(`${robot.id}_`);
-    ctx.openDetails(`Robot ${robot.id} — ${robot.name}`, tags, `${robot.driver === 'remote' ? 'remote robot agent' : 'simulated in the runtime'} · hardware: ${robot.hardware.join(', ').replaceAll('_', ' ')}`);
+    const vehicle = robot.driver === 'vda5050' ? await tagsWithPrefix(`_sys.vda5050.${robot.id}.`) : [];
+    ctx.openDetails(`Robot ${robot.id} — ${robot.name}`, [...tags, ...vehicle], `${DRIVERS[robot.driver] || robot.driver} · hardware: ${robot.hardware.join(', ').replaceAll('_', ' ')}`);
   };
   const openTask = async (task) => {
     const tags = await tagsWithPrefix(`${task.id}_`);
@@ -27,6 +31,7 @@ function mountFleet(root, ctx, plant) {
   const floor = new Floor(fleet, ctx.live, { robot: openRobot, task: openTask });
   const cards = new TaskCards(fleet, ctx.live, openTask);
   const robots = new RobotList(fleet, ctx.live, openRobot);
+  const vehicles = await vda5050Layer(floor, fleet, ctx.live);  // null without VDA 5050 vehicles
   const clock = el('span', { class: 'muted small num live-value' });
   root.append(el('div', { class: 'overview' },
     el('section', { class: 'panel floor-panel' },
@@ -40,12 +45,14 @@ function mountFleet(root, ctx, plant) {
         el('span', { text: 'click a robot or a station for its tags' }),
         el('span', { class: 'phone-only', text: 'drag the floor sideways to see all of it' }),
       ),
-      robots.node),
+      robots.node,
+      vehicles ? vehicles.node : null),
     el('div', { class: 'side' }, cards.node),
   ));
-  const names = [...new Set([...floor.names(), ...cards.names(), ...robots.names(), '_sys.time'])];
+  const names = [...new Set([...floor.names(), ...cards.names(), ...robots.names(), ...(vehicles ? vehicles.names() : []), '_sys.time'])];
   const update = () => {
     floor.update();
+    if (vehicles) vehicles.update();
     cards.update();
     robots.update();
     const time = ctx.live.get('_sys.time');

@@ -58,7 +58,7 @@ export async function mount(root, ctx) {
       const tags = robot.tags;
       const quality = ctx.live.get(tags.xpos);
       const online = tags.online ? value(tags.online) !== false : true;
-      const offline = (quality && quality.q === 2) || (robot.driver === 'remote' && !online);
+      const offline = (quality && quality.q === 2) || ((robot.driver === 'remote' || robot.driver === 'vda5050') && !online);
       const navstate = offline ? 'offline' : (value(tags.navstate) || 'idle');
       nodes.state.className = `chip ${NAVSTATE_CLASS[navstate] || 'idle'}`;
       setText(nodes.state, navstate);
@@ -69,7 +69,8 @@ export async function mount(root, ctx) {
       setText(nodes.load, typeof value(tags.load) === 'number' ? `${value(tags.load)} / ${value(tags.loadcap) ?? robot.load_capacity} items` : '—');
       const current = value(tags.tcurr), where = value(tags.currloc) || 0;
       setText(nodes.task, current ? `task ${current}: ${CURRLOC_TEXT[where] || ''}` : 'none');
-      setText(nodes.driver, robot.driver === 'remote' ? `remote agent · ${online ? 'online' : 'OFFLINE'}` : 'simulated in the runtime');
+      const kind = { remote: 'remote agent', vda5050: 'VDA 5050 vehicle' }[robot.driver];
+      setText(nodes.driver, kind ? `${kind} · ${online ? 'online' : 'OFFLINE'}` : 'simulated in the runtime');
       for (const node of [nodes.pose, nodes.speed]) node.classList.toggle('q-bad', Boolean(quality && quality.q === 2));
     }
   };

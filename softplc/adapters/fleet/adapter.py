@@ -182,6 +182,8 @@ class FleetAdapter:
         ids = self.robots.ids
         planners: list[PathPlanner] = []  # one per robot size, the map inflated now, not mid-run
         for robot in self.robots:
+            if robot.driver is DriverKind.VDA5050:
+                continue  # driven by the VDA 5050 master control (softplc/adapters/vda5050), on its own computer
             planner = self.floor.planner(robot.radius)
             if planner not in planners:
                 planners.append(planner)
@@ -213,7 +215,7 @@ class FleetAdapter:
                 self.remotes[robot.id] = link
                 self._watch[f"{robot.id}_report"] = (link, "report")
                 self._watch[f"{robot.id}_agent"] = (link, "agent")
-            elif f"{robot.id}_agent" in db:  # an agent may try to register for it: refuse it
+            elif robot.driver is DriverKind.SIM and f"{robot.id}_agent" in db:  # an agent may try to register for it: refuse it
                 refusal = AgentRefusal(db, robot, self.robots.path, plant.clock.now)
                 self.refusals[robot.id] = refusal
                 self._watch[f"{robot.id}_agent"] = (refusal, "agent")
@@ -258,8 +260,11 @@ class FleetAdapter:
 
     def describe(self) -> str:
         remote = len([r for r in self.robots if r.driver is DriverKind.REMOTE])
+        vehicles = len([r for r in self.robots if r.driver is DriverKind.VDA5050])
         width, height = self.floor.grid.size_m
-        return (f"fleet: {plural(len(self.robots), 'robot')} ({len(self.robots) - remote} simulated, {remote} remote) "
+        simulated = len(self.robots) - remote - vehicles
+        shown = f"{simulated} simulated, {remote} remote" + (f", {vehicles} VDA 5050 (softplc/adapters/vda5050)" if vehicles else "")
+        return (f"fleet: {plural(len(self.robots), 'robot')} ({shown}) "
                 f"on map '{self.floor.grid.name}' {width:.2f} x {height:.2f} m, cycle {self.cycle * 1000:g} ms")
 
     # -- for programs, scenarios and tests -----------------------------------------------

@@ -15,7 +15,13 @@ if TYPE_CHECKING:
 
 
 def build(config: PlantConfig, args: argparse.Namespace | None) -> list[Adapter]:
-    return []  # the settings only: each MQTT user connects by itself
+    """The embedded broker when `mqtt: {embedded: true}` (a demo); else nothing: each MQTT user connects by itself."""
+    if not isinstance(config.raw.get("mqtt"), dict) or not config.raw["mqtt"].get("embedded"):
+        return []
+    from softplc.adapters.mqtt.broker import EmbeddedBroker
+    from softplc.protocols.mqtt_settings import MqttSettings
+
+    return [EmbeddedBroker(MqttSettings.from_config(config))]
 
 
 MANIFEST = Manifest(

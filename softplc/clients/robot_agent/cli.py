@@ -35,8 +35,16 @@ def add_commands(subparsers: Any) -> None:
         epilog="Example: softplc robot-agent --endpoint opc.tcp://127.0.0.1:4840/softplc/ --robot r01 "
         f"--user r01 (password from ${PASSWORD_ENV}, --password-file or --password)",
     )
-    agent.add_argument("--endpoint", required=True, metavar="URL", type=endpoint_urls,
+    agent.add_argument("--endpoint", metavar="URL", type=endpoint_urls,
                        help="the runtime's OPC UA endpoint, opc.tcp://HOST:PORT/PATH; a redundant pair's two, comma separated: the agent follows the active")
+    vda = agent.add_argument_group("as a VDA 5050 vehicle (any VDA 5050 master control drives it over MQTT; docs/vda5050.md)")
+    vda.add_argument("--vda5050", metavar="BROKER", help="instead of --endpoint: the MQTT broker, mqtt://HOST:PORT (mqtts:// for TLS)")
+    vda.add_argument("--protocol-version", choices=("2.0", "2.1"), default="2.0", help="VDA 5050 version (default 2.0)")
+    vda.add_argument("--interface", default="uagv", metavar="NAME", help="interfaceName topic level (default uagv)")
+    vda.add_argument("--map-id", default="factory", metavar="ID", help="the mapId it reports (the master's roadmap map_id; default factory)")
+    vda.add_argument("--state-interval", type=float, default=30.0, metavar="S", help="state at least this often, seconds (default 30)")
+    vda.add_argument("--mqtt-user", metavar="NAME", help="broker user name (password from --password-file, or $SOFTPLC_PASSWORD)")
+    vda.add_argument("--ca-file", type=Path, metavar="PEM", help="CA certificates the broker's TLS certificate must chain to")
     agent.add_argument("--robot", required=True, metavar="ID", help="this robot's id in robots.yaml, e.g. r01")
     agent.add_argument("--robots", default=DEFAULT_ROBOTS, metavar="FILE", help=f"robots file (default {DEFAULT_ROBOTS})")
     agent.add_argument("--map", default=DEFAULT_MAP, metavar="FILE", help=f"map YAML (default {DEFAULT_MAP})")
@@ -57,6 +65,14 @@ def add_commands(subparsers: Any) -> None:
 
 
 def cmd_robot_agent(args: argparse.Namespace) -> int:
+    if args.vda5050 is not None:
+        from softplc.clients.robot_agent.vda5050.cli import run_vehicle
+
+        return run_vehicle(args)
+    if args.endpoint is None:
+        print("softplc robot-agent: give --endpoint opc.tcp://HOST:PORT/PATH (or --vda5050 mqtt://HOST:PORT for a VDA 5050 vehicle)",
+              file=sys.stderr)
+        return 2
     from softplc.clients.robot_agent.agent import AgentError, Credentials, RobotAgent
     from softplc.robotics.controller import SpeedLimits
     from softplc.robotics.floor import Floor

@@ -64,7 +64,7 @@ def test_robot_file_errors_are_located_with_hints() -> None:
     assert problems(caught) == [
         (9, 16, "unknown value 'laser_rangefinder' for item 1 of 'hardware' (did you mean 'laser_range_finder'?); "
          "expected one of: laser_range_finder, camera, two_wheel_drive, sonar, gripper"),
-        (11, 13, "unknown value 'simulated' for 'driver'; expected one of: sim, remote"),
+        (11, 13, "unknown value 'simulated' for 'driver'; expected one of: sim, remote, vda5050"),
         (14, 15, "'width_mm' must be a number, not string 'wide'"),
         (17, 23, "'max_linear_speed' must be more than 0, not 0"),
         (19, 5, "'start' is missing the required key 'y'"),
