@@ -45,11 +45,16 @@ fi
 # paho-mqtt < 2 while softplc's aiomqtt needs 2: it gets a virtualenv of its own.
 if [ ! -x tests/sparkplug/.venv/bin/python ] || ! tests/sparkplug/.venv/bin/python -c 'import pysparkplug' 2>/dev/null; then
   { python3 -m venv tests/sparkplug/.venv \
-      && tests/sparkplug/.venv/bin/pip install --quiet --disable-pip-version-check pysparkplug==0.6.1 paho-mqtt==1.6.1; } \
-    || echo "warning: could not make tests/sparkplug/.venv (pysparkplug); the Sparkplug host tests will say so" >&2
+      && RETRY_NAME="pip install pysparkplug" scripts/retry.sh 3 10 \
+        tests/sparkplug/.venv/bin/pip install --quiet --disable-pip-version-check pysparkplug==0.6.1 paho-mqtt==1.6.1; } \
+    || trouble "could not make tests/sparkplug/.venv (pysparkplug, the Sparkplug host)"
 fi
 # The VDA 5050 tests drive vda-5050-lib's virtual vehicles (tests/vda5050_node/vehicles.js), a counterpart nobody here wrote.
-if command -v npm >/dev/null 2>&1 && [ ! -d tests/vda5050_node/node_modules/vda-5050-lib ] && [ -f tests/vda5050_node/package.json ]; then
-  (cd tests/vda5050_node && npm ci --silent --no-audit --no-fund >/dev/null 2>&1) \
-    || echo "warning: npm ci in tests/vda5050_node failed; the VDA 5050 tests with vda-5050-lib will say so" >&2
+if [ -f tests/vda5050_node/package.json ] && [ ! -d tests/vda5050_node/node_modules/vda-5050-lib ]; then
+  if ! command -v npm >/dev/null 2>&1; then
+    trouble "npm is missing, so vda-5050-lib (tests/vda5050_node) is not installed"
+  elif ! RETRY_NAME="npm ci in tests/vda5050_node" scripts/retry.sh 3 10 \
+      bash -c 'cd tests/vda5050_node && npm ci --silent --no-audit --no-fund >/dev/null 2>&1'; then
+    trouble "npm ci in tests/vda5050_node failed (vda-5050-lib)"
+  fi
 fi
