@@ -5,9 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from softplc.adapters import build_adapters
 from softplc.clock import RealClock
 from softplc.latency.client import HandshakeClient
+from softplc.latency.driver import DriverError
 from softplc.latency.opcua_driver import DEFAULT_NODE_IDS, OpcuaDriver
 from softplc.latency.plant import handshake_config
 from softplc.opcua import Role, UserStore
@@ -74,3 +77,40 @@ async def test_ready_is_seen_when_its_publish_response_arrives(tmp_path):
     assert len(samples) == 4
     for sample in samples:
         assert sample["ready_stamp"] < sample["t_seen"] <= sample["t_sent"] < sample["t_done"]
+
+
+async def test_a_plc_that_never_sets_ready_ends_the_run_with_what_the_subscription_saw(tmp_path):
+    """Three timeouts in a row end the run; the message says what was last pushed, and when."""
+    from softplc.config import parse_config
+
+    UserStore(tmp_path / "users.yaml").add("tester", Role.OPERATOR, PASSWORD)
+    config = parse_config("""version: 1
+plant: {name: idle}
+tags:
+  Ready: {type: bool}
+  TaskID: {type: uint16}
+servers:
+  opcua: {enabled: true, endpoint: "opc.tcp://127.0.0.1:0/softplc/"}
+  modbus: {enabled: false}
+  hmi: {enabled: false}
+""", tmp_path / "idle.yaml")
+    runtime = Runtime(config, RealClock(), state_dir=tmp_path)
+    for adapter in build_adapters(config, None):
+        runtime.add_adapter(adapter)
+    await runtime.start()
+    server = next(adapter for adapter in runtime.adapters if adapter.name == "opcua")
+    driver = OpcuaDriver(server.endpoint, {"ready": "ns={ns};s=Ready", "task_id": "ns={ns};s=TaskID"}, user="tester", password=PASSWORD)
+    events: list[dict[str, Any]] = []
+    try:
+        await driver.connect()
+        try:
+            with pytest.raises(DriverError) as ended:
+                await HandshakeClient(driver, events.append, samples=2, duration=None, timeout=0.3).run()
+        finally:
+            await driver.close()
+    finally:
+        await runtime.stop()
+    assert [event["type"] for event in events] == ["hello", "timeout", "timeout", "timeout"]
+    message = str(ended.value)
+    assert "3 times in a row" in message and "no new Ready pushed within 0.3 s" in message
+    assert "last PublishResponse" in message and "s ago; Ready low as last pushed" in message

@@ -69,7 +69,7 @@ class HandshakeClient:
                 self.emit({"type": "timeout", "index": index, "waited": self.timeout, "message": str(error), "t": time.monotonic()})
                 if consecutive >= MAX_CONSECUTIVE_TIMEOUTS:
                     raise DriverError(f"no new Ready within {self.timeout:g} s, {consecutive} times in a row: "
-                                      "is the PLC running the handshake?") from None
+                                      f"is the PLC running the handshake? (the last time: {error})") from None
                 continue
             consecutive = 0
             # The timed part: from seeing Ready to the write's acknowledgement, nothing else.

@@ -220,8 +220,16 @@ class OpcuaDriver(PollingDriver):
                     self._answered_rises = self._rises
                     return snapshot.at(self._ready_seen_at or time.monotonic())
                 await self._wait_push(deadline, f"no new Ready pushed within {timeout:g} s")
+        except TimeoutError as error:
+            raise TimeoutError(f"{error} ({self._last_push()})") from None
         finally:
             self._awaiting_ready = False
+
+    def _last_push(self) -> str:
+        """What the subscription last brought, for a timeout's message."""
+        last = getattr(self._sub, "last_publish_at", None)
+        ago = f"{time.monotonic() - last:.1f} s ago" if last else "never"
+        return f"last PublishResponse {ago}; Ready {'high' if self._latest.get('ready') else 'low'} as last pushed"
 
     async def settle(self, ready: Snapshot, handshakes: int | None, timeout: float) -> Snapshot:
         if not self.subscription:
