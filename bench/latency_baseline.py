@@ -154,8 +154,9 @@ NAIVE_OVER_MODBUS = 5.0  # ... and >= this x Modbus's
 
 def check_ratios(runs: list[Measurement], floor: Floor | None, scan_ms: float) -> tuple[list[str], list[str]]:
     """(ratio lines to print, goal lines) comparing the runs of one bench with each other and the floor."""
-    means = {run.target.protocol if not run.label.startswith("naive") else "naive": to_json(run)["hires"]["mean"]
-             for run in runs if run.samples}
+    hires = {"naive" if run.label.startswith("naive") else run.target.protocol: to_json(run)["hires"] for run in runs if run.samples}
+    means = {name: figures["mean"] for name, figures in hires.items()}
+    medians = {name: figures["percentiles"]["p50"] for name, figures in hires.items()}
     lines: list[str] = []
     goals: list[str] = []
     judged = scan_ms == 1.0
@@ -163,8 +164,6 @@ def check_ratios(runs: list[Measurement], floor: Floor | None, scan_ms: float) -
     def goal(ok: bool, text: str) -> None:
         goals.append(("ok          " if ok else "GOAL MISSED ") + text)
 
-    medians = {run.target.protocol if not run.label.startswith("naive") else "naive": to_json(run)["hires"]["percentiles"]["p50"]
-               for run in runs if run.samples}
     if floor is not None:
         lines.append(floor.describe())
         if "opcua" in means:
