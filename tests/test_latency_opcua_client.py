@@ -41,12 +41,12 @@ async def test_the_answer_reaches_the_server_before_the_next_publish_request(tmp
             waiting_at_answer.append(sum(len(protocol.processor._publish_requests) for protocol in server.server.bserver.clients))
 
     unsubscribe = runtime.db.on_write(on_write)
-    driver = OpcuaDriver(server.endpoint, DEFAULT_NODE_IDS, user="tester", password=PASSWORD)
+    driver = OpcuaDriver(server.endpoint, DEFAULT_NODE_IDS, user="tester", password=PASSWORD, timeout=30.0)
     events: list[dict[str, Any]] = []
     try:
         await driver.connect()
         try:
-            await HandshakeClient(driver, events.append, samples=6, duration=None, timeout=3.0).run()
+            await HandshakeClient(driver, events.append, samples=6, duration=None, timeout=10.0).run()
         finally:
             await driver.close()
     finally:
@@ -63,12 +63,12 @@ async def test_the_answer_reaches_the_server_before_the_next_publish_request(tmp
 async def test_ready_is_seen_when_its_publish_response_arrives(tmp_path):
     """t_seen is taken as asyncua's publish loop hands over the PublishResult, before the answer."""
     runtime, server = await _runtime(tmp_path)
-    driver = OpcuaDriver(server.endpoint, DEFAULT_NODE_IDS, user="tester", password=PASSWORD)
+    driver = OpcuaDriver(server.endpoint, DEFAULT_NODE_IDS, user="tester", password=PASSWORD, timeout=30.0)
     events: list[dict[str, Any]] = []
     try:
         await driver.connect()
         try:
-            await HandshakeClient(driver, events.append, samples=4, duration=None, timeout=3.0).run()
+            await HandshakeClient(driver, events.append, samples=4, duration=None, timeout=10.0).run()
         finally:
             await driver.close()
     finally:
@@ -99,7 +99,7 @@ servers:
         runtime.add_adapter(adapter)
     await runtime.start()
     server = next(adapter for adapter in runtime.adapters if adapter.name == "opcua")
-    driver = OpcuaDriver(server.endpoint, {"ready": "ns={ns};s=Ready", "task_id": "ns={ns};s=TaskID"}, user="tester", password=PASSWORD)
+    driver = OpcuaDriver(server.endpoint, {"ready": "ns={ns};s=Ready", "task_id": "ns={ns};s=TaskID"}, user="tester", password=PASSWORD, timeout=30.0)
     events: list[dict[str, Any]] = []
     try:
         await driver.connect()
