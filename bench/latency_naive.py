@@ -87,13 +87,14 @@ async def naive_client(endpoint: str, samples: int, poll: float) -> None:
         ready = await handshake.get_child(f"{index}:Ready")
         task_id = await handshake.get_child(f"{index}:TaskID")
         stamp = await handshake.get_child(f"{index}:ReadyStamp")
-        next_task, answered, seen_low = 1, 0, True
+        next_task, answered = 1, 0
         while answered <= samples:
             value = await ready.read_value()
             t_seen = time.monotonic()
-            if not value:
-                seen_low = True
-            elif seen_low:
+            # Ready stays low from our own clear until the server sets it for the next task, so a
+            # high Ready is always a new one (waiting to see it low first hung for good when a busy
+            # machine delayed the next poll past the shortest task, 100 ms).
+            if value:
                 t_sent = time.monotonic()
                 await task_id.write_value(next_task)
                 await ready.write_value(False)
@@ -104,7 +105,6 @@ async def naive_client(endpoint: str, samples: int, poll: float) -> None:
                                   "t_seen": t_seen, "t_sent": t_sent, "t_done": t_done}), flush=True)
                 answered += 1
                 next_task = next_task % 3 + 1
-                seen_low = False
             await asyncio.sleep(poll)
         print(json.dumps({"type": "done"}), flush=True)
 

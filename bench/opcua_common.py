@@ -28,7 +28,7 @@ USER, PASSWORD = "bench", "bench-password-1"
 logging.getLogger("asyncua").setLevel(logging.ERROR)  # the client's notes on revised parameters are noise here
 
 CHANGER = '''
-from softplc import InOut, Output, Program
+from softplc import InOut, Output, Param, Program
 
 
 class Changer(Program):
@@ -40,6 +40,22 @@ class Changer(Program):
     def scan(self) -> None:
         self.counter = (self.counter + 1) % 2**31
         self.values = [self.counter] * len(self.values)
+
+
+class Stamper(Program):
+    """Every `every`-th scan: the scan's monotonic time into `stamp` (a sparse change, like the handshake's Ready)."""
+
+    stamp = Output("time.monotonic() of the scan that last changed it, in s")
+    every = Param(100, "scans between two changes")
+
+    def setup(self) -> None:
+        self.count = 0
+
+    def scan(self) -> None:
+        self.count += 1
+        if self.count >= self.every:
+            self.count = 0
+            self.stamp = self.clock.monotonic()
 '''
 
 
@@ -78,6 +94,27 @@ tasks:
       - name: changer
         program: bench_changer.py:Changer
         bind: {{values: {binding}, counter: counter}}
+"""
+
+
+def floor_plant_yaml(interval_ms: float, change_every_ms: float = 100.0) -> str:
+    """A plant whose only task (at `interval_ms`) stamps `stamp` every `change_every_ms`; `answer`
+    and `flag` take a client's writes (the shape of the handshake's answer: a uint16 and a bool)."""
+    every = max(1, round(change_every_ms / interval_ms))
+    return f"""version: 1
+plant: {{name: opcua-floor}}
+tags:
+  stamp: {{type: float64, unit: s, access: ro, description: monotonic time of the scan that changed it}}
+  answer: {{type: uint16, description: written by the client}}
+  flag: {{type: bool, description: written by the client}}
+tasks:
+  fast:
+    interval: {interval_ms:g}ms
+    programs:
+      - name: stamper
+        program: bench_changer.py:Stamper
+        bind: {{stamp: stamp}}
+        params: {{every: {every}}}
 """
 
 

@@ -15,6 +15,14 @@ The server's 10 ms task start latency while being queried comes from its exit st
 Goals (issue 3): delivery p99 <= 5 ms; the 10 ms task's p99 start latency <= 1 ms.
 
     .venv/bin/python bench/opcua_roundtrip.py [--count 1000] [--seconds 10]
+
+`--floor MS` measures instead the floor of the case IV handshake at a MS scan (what
+bench/latency_baseline.py compares softplc's handshake with, in the same run): the mean delivery
+of a sparse change (a tag the task stamps with its scan's monotonic time every 100 ms → the
+PublishResult in the client's publish loop, before any dispatch) plus the mean round trip of one
+Write of a uint16 and a bool (the answer's shape), both by a bare asyncua client.
+
+    .venv/bin/python bench/opcua_roundtrip.py --floor 1 [--count 200]
 """
 
 from __future__ import annotations
@@ -22,16 +30,20 @@ from __future__ import annotations
 import argparse
 import asyncio
 import random
+import statistics
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from asyncua import Client, ua  # noqa: E402
 
-from opcua_common import PASSWORD, USER, changing_tags, goal, on_publish, percentile, plant_yaml, start_server, task_latency  # noqa: E402
+from opcua_common import (  # noqa: E402
+    PASSWORD, USER, changing_tags, floor_plant_yaml, goal, on_publish, percentile, plant_yaml, start_server, task_latency,
+)
 
 DELIVERY_GOAL_MS = 5.0
 LATENCY_GOAL_MS = 1.0
@@ -111,12 +123,97 @@ async def run(endpoint: str, count: int, seconds: float, changing: list[str]) ->
     return results
 
 
+@dataclass
+class Floor:
+    """What the protocol alone costs one handshake: a delivery plus a write, by a bare asyncua client."""
+
+    scan_ms: float
+    delivery: list[float]  # s: the scan's stamp → the PublishResult in the client's publish loop
+    write: list[float]  # s: a Write of a uint16 and a bool sent → acknowledged
+
+    @property
+    def delivery_ms(self) -> float:
+        return statistics.fmean(self.delivery) * 1e3
+
+    @property
+    def write_ms(self) -> float:
+        return statistics.fmean(self.write) * 1e3
+
+    @property
+    def mean_ms(self) -> float:
+        return self.delivery_ms + self.write_ms
+
+    @property
+    def median_ms(self) -> float:
+        """The same of medians (a busy machine's stalls shift them less)."""
+        return (statistics.median(self.delivery) + statistics.median(self.write)) * 1e3
+
+    @classmethod
+    def joined(cls, floors: list[Floor]) -> Floor:
+        """One floor of the samples of several measurements (e.g. before and after a run)."""
+        return cls(floors[0].scan_ms, [s for f in floors for s in f.delivery], [s for f in floors for s in f.write])
+
+    def describe(self) -> str:
+        return (f"floor at a {self.scan_ms:g} ms scan: {self.mean_ms:.3f} ms = delivery {self.delivery_ms:.3f} "
+                f"(median {statistics.median(self.delivery) * 1e3:.3f}, {len(self.delivery)} changes) + write "
+                f"{self.write_ms:.3f} (median {statistics.median(self.write) * 1e3:.3f}, {len(self.write)} writes), means")
+
+
+async def measure_floor(endpoint: str, scan_ms: float, samples: int, writes: int, change_every_ms: float = 100.0) -> Floor:
+    """Delivery of `samples` sparse changes, then `writes` back-to-back writes (floor_plant_yaml's plant)."""
+    client = Client(endpoint, timeout=10)
+    client.set_user(USER)
+    client.set_password(PASSWORD)
+    async with client:
+        ns = await client.get_namespace_index("urn:softplc:tags")
+        delivery: list[float] = []
+        enough = asyncio.Event()
+
+        def item(notification) -> None:
+            arrived = time.monotonic()
+            stamp = notification.Value.Value.Value if notification.Value and notification.Value.Value else None
+            if stamp:
+                delivery.append(arrived - stamp)
+                if len(delivery) > samples:
+                    enough.set()
+
+        subscription = await client.create_subscription(0, Delivery())
+        on_publish(client, subscription, item)
+        await subscription.subscribe_data_change(client.get_node(ua.NodeId("stamp", ns)), queuesize=1)
+        await asyncio.wait_for(enough.wait(), timeout=3 * samples * change_every_ms / 1e3 + 30)
+        await subscription.delete()
+        delivery = delivery[1:samples + 1]  # the first is the value at subscribing, not a change
+        nodes = [client.get_node(ua.NodeId("answer", ns)), client.get_node(ua.NodeId("flag", ns))]
+        write: list[float] = []
+        for index in range(writes + 10):
+            values = [ua.DataValue(ua.Variant(index % 3 + 1, ua.VariantType.UInt16)), ua.DataValue(ua.Variant(bool(index % 2), ua.VariantType.Boolean))]
+            started = time.monotonic()
+            await client.write_values(nodes, values)
+            if index >= 10:  # after a warm-up
+                write.append(time.monotonic() - started)
+    return Floor(scan_ms, delivery, write)
+
+
+async def floor_at(scan_ms: float, samples: int = 200, writes: int = 500, change_every_ms: float = 100.0) -> Floor:
+    """Serve floor_plant_yaml with `softplc run` in its own process and measure the floor against it."""
+    with tempfile.TemporaryDirectory() as tmp:
+        server = start_server(Path(tmp) / "floor", floor_plant_yaml(scan_ms, change_every_ms))
+        try:
+            return await measure_floor(server.endpoint, scan_ms, samples, writes, change_every_ms)
+        finally:
+            server.stop()
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--count", type=int, default=1000)
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--nice", type=int, default=0, help="run the server (and its baseline) at this niceness, e.g. -10 (root)")
+    parser.add_argument("--floor", type=float, metavar="MS", help="measure the case IV handshake's floor at a MS scan instead")
     args = parser.parse_args()
+    if args.floor is not None:
+        print(asyncio.run(floor_at(args.floor, samples=min(args.count, 200), writes=args.count)).describe())
+        return 0
     yaml_text = plant_yaml(1000, changing=10)
     with tempfile.TemporaryDirectory() as tmp:
         baseline = start_server(Path(tmp) / "baseline", yaml_text, opcua=False, nice=args.nice)

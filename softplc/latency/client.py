@@ -70,7 +70,7 @@ class HandshakeClient:
                 self.emit({"type": "timeout", "index": index, "waited": self.timeout, "message": str(error), "t": time.monotonic()})
                 if consecutive >= MAX_CONSECUTIVE_TIMEOUTS:
                     raise DriverError(f"no new Ready within {self.timeout:g} s, {plural(consecutive, 'time')} in a row: "
-                                      "is the PLC running the handshake?") from None
+                                      f"is the PLC running the handshake? (the last time: {error})") from None
                 continue
             consecutive = 0
             # The timed part: from seeing Ready to the write's acknowledgement, nothing else.
@@ -109,12 +109,19 @@ class HandshakeClient:
             status = "missed"
         else:
             status = "ok"  # counted > 1: someone else answered too ("foreign")
+        stamp = ready.ready_stamp if ready.ready_stamp is not None else after.ready_stamp
+        # A stamp read after the answer (a subscription pushes Ready alone) is the answered Ready's
+        # unless the client was held up longer than the PLC's next task: then the PLC has set its
+        # next Ready, after the client saw this one. That stamp would make the delay short or
+        # negative; the answered one's is unknown.
+        lost = stamp is not None and stamp > ready.received
         self.emit({
             "type": "warmup" if index == 0 else "sample",
             "index": index,
             "task_id": task_id,
             "status": status,
-            "ready_stamp": ready.ready_stamp if ready.ready_stamp is not None else after.ready_stamp,
+            "ready_stamp": None if lost else stamp,
+            "stamp_lost": lost,
             "t_seen": ready.received,
             "t_sent": t_sent,
             "t_done": t_done,

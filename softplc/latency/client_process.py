@@ -84,6 +84,7 @@ async def run_client(target: Target, result: Measurement, progress: Progress, st
                 if sample.status == "missed" and kind == "sample":
                     result.missed += 1
                 result.foreign += int(event.get("foreign") or 0)
+                result.stamps_lost += bool(event.get("stamp_lost")) and kind == "sample"
                 if sample.plc_handshakes is not None:
                     last_handshakes = sample.plc_handshakes
             elif kind == "timeout":

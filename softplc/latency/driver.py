@@ -114,13 +114,18 @@ class PollingDriver(Driver):
 
     async def wait_ready(self, tracker: ReadyTracker, timeout: float) -> Snapshot:
         deadline = time.monotonic() + timeout
+        # Polls start every poll_interval (a read that takes longer is followed at once, never by
+        # a burst): sleeping a whole interval after each read made the period interval + round
+        # trip, and a Ready waited that much longer to be seen.
+        due = time.monotonic()
         while True:
             snapshot = await self.read()
             if tracker.observe(snapshot):
                 return snapshot
             if snapshot.received >= deadline:
                 raise TimeoutError(f"no new Ready within {timeout:g} s")
-            await asyncio.sleep(self.poll_interval)
+            due = max(due + self.poll_interval, time.monotonic())
+            await asyncio.sleep(due - time.monotonic())
 
     async def settle(self, ready: Snapshot, handshakes: int | None, timeout: float) -> Snapshot:
         deadline = time.monotonic() + timeout

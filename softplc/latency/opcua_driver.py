@@ -3,6 +3,10 @@
 Node ids are given per role; `{ns}` in a node id stands for the namespace index of
 `namespace` (a URI) or, when none is given, of softplc's tag namespace (urn:softplc:tags) if
 the server has it, else of the server's last namespace. Writes carry the node's own variant type (servers check it strictly).
+
+By subscription, Ready's notifications are read in asyncua's publish loop (ready_subscription.py):
+the client notes when it saw Ready as the PublishResponse is decoded, and its answer goes on the
+wire before the next Publish request.
 """
 
 from __future__ import annotations
@@ -18,11 +22,15 @@ from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 
 from softplc.latency.certificate import MODES, Security, application_uri
 from softplc.latency.driver import REQUIRED_ROLES, TAG_NAMES, DriverError, PollingDriver, ReadyTracker, Snapshot
+from softplc.latency.ready_subscription import ReadySubscription
 
 log = logging.getLogger(__name__)
 
 SOFTPLC_NAMESPACE = "urn:softplc:tags"
 DEFAULT_NODE_IDS: dict[str, str] = {role: f"ns={{ns}};s={name}" for role, name in TAG_NAMES.items()}
+# Longest the next Publish request waits for the answer to a Ready just seen (it comes at once;
+# this bounds a client that stopped answering).
+ANSWER_GATE_SECONDS = 1.0
 
 
 class OpcuaDriver(PollingDriver):
@@ -60,11 +68,13 @@ class OpcuaDriver(PollingDriver):
         self.types: dict[str, ua.VariantType] = {}
         self._roles: list[str] = []
         self._latest: dict[str, Any] = {}
-        self._changed = asyncio.Event()
+        self._push_waiter: asyncio.Future[None] | None = None  # wait_ready or settle waiting for a push
+        self._answer_gate: asyncio.Future[None] | None = None  # the publish loop waiting for our answer
         self._ready_seen_at = 0.0
         # Subscription mode answers each pushed rise of Ready (Ready is all it monitors).
         self._rises = 0
         self._answered_rises = 0
+        self._awaiting_ready = False  # wait_ready is waiting: a rise will be answered at once
         mode = f"subscription, publishing interval {publishing_interval:g} ms" if subscription else f"polling every {poll_interval * 1e3:g} ms"
         secured = security.split(",")[0] if security else "None"
         self.description = f"OPC UA {endpoint} ({mode}; security {secured})"
@@ -122,32 +132,53 @@ class OpcuaDriver(PollingDriver):
         params.MaxNotificationsPerPublish = 0
         params.PublishingEnabled = True
         params.Priority = 0
-        self._sub = await self.client.create_subscription(params, self)
+        # As Client.create_subscription, with the subscription class that reads PublishResults inline.
+        self._sub = ReadySubscription(self.client.uaclient.session, params, self)
+        await self._sub.init()
         # Only Ready is monitored. Every other monitored tag that changes with it would be queued
         # and published when our next Publish request arrives, which the server handles just
         # before our Write: measured, that put ~0.7 ms of publishing in front of every answer.
         # The other figures are read once per handshake after the answer (see settle).
         ready = self.nodes["ready"]
-        self._role_of = {ready.nodeid: "ready"}
-        result = await self._sub.subscribe_data_change(ready, queuesize=1, sampling_interval=0.0)
-        if isinstance(result, ua.StatusCode):
-            raise DriverError(f"cannot subscribe to Ready ({ready.nodeid.to_string()}): {result}")
+        try:
+            await self._sub.subscribe_data_change(ready, queuesize=1, sampling_interval=0.0)
+        except Exception as error:
+            raise DriverError(f"cannot subscribe to Ready ({ready.nodeid.to_string()}): {error!r}") from None
 
-    def datachange_notification(self, node: Node, value: Any, data: Any) -> None:
-        """asyncua calls this for each pushed value, in the order the server sent them."""
-        role = self._role_of.get(node.nodeid)
-        if role is None:
-            return
-        self._latest[role] = value
-        if role == "ready" and value:
-            self._ready_seen_at = time.monotonic()
+    def value_changed(self, value: Any, received: float) -> None:
+        """Ready as pushed, in the order the server sent it (ReadySubscription calls this)."""
+        self._latest["ready"] = value
+        if value:
+            self._ready_seen_at = received
             self._rises += 1
-        self._changed.set()
+        waiter = self._push_waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
 
-    def status_change_notification(self, status: Any) -> None:
+    def status_changed(self, status: ua.StatusCode) -> None:
         log.warning("subscription status changed: %s", status)
 
+    async def published(self) -> None:
+        """Hold the next Publish request back while a Ready just seen is being answered."""
+        if not (self._awaiting_ready and self._rises > self._answered_rises):
+            return
+        gate = self._answer_gate = asyncio.get_running_loop().create_future()
+        try:
+            await asyncio.wait_for(gate, ANSWER_GATE_SECONDS)
+        except TimeoutError:
+            pass
+        finally:
+            self._answer_gate = None
+
+    def _open_gate(self) -> None:
+        gate = self._answer_gate
+        if gate is not None and not gate.done():
+            # The publish loop resumes once this task waits for the Write's response: after the
+            # Write has gone out (asyncua sends it before its first wait).
+            gate.set_result(None)
+
     async def close(self) -> None:
+        self._open_gate()
         try:
             await self.client.disconnect()
         except Exception as error:  # the server may be gone already
@@ -163,6 +194,7 @@ class OpcuaDriver(PollingDriver):
     async def answer(self, task_id: int) -> None:
         items = [(self.nodes["task_id"], ua.DataValue(ua.Variant(task_id, self.types["task_id"])))]
         items.append((self.nodes["ready"], ua.DataValue(ua.Variant(False, self.types["ready"]))))
+        self._open_gate()
         try:
             results = await self.client.write_values([node for node, _ in items], [value for _, value in items], raise_on_partial_error=False)
         except Exception as error:
@@ -180,12 +212,24 @@ class OpcuaDriver(PollingDriver):
         if not self.subscription:
             return await super().wait_ready(tracker, timeout)
         deadline = time.monotonic() + timeout
-        while True:
-            snapshot = self._cached()
-            if snapshot is not None and snapshot.ready and self._rises > self._answered_rises:
-                self._answered_rises = self._rises
-                return snapshot.at(self._ready_seen_at or time.monotonic())
-            await self._wait_push(deadline, f"no new Ready pushed within {timeout:g} s")
+        self._awaiting_ready = True
+        try:
+            while True:
+                snapshot = self._cached()
+                if snapshot is not None and snapshot.ready and self._rises > self._answered_rises:
+                    self._answered_rises = self._rises
+                    return snapshot.at(self._ready_seen_at or time.monotonic())
+                await self._wait_push(deadline, f"no new Ready pushed within {timeout:g} s")
+        except TimeoutError as error:
+            raise TimeoutError(f"{error} ({self._last_push()})") from None
+        finally:
+            self._awaiting_ready = False
+
+    def _last_push(self) -> str:
+        """What the subscription last brought, for a timeout's message."""
+        last = getattr(self._sub, "last_publish_at", None)
+        ago = f"{time.monotonic() - last:.1f} s ago" if last else "never"
+        return f"last PublishResponse {ago}; Ready {'high' if self._latest.get('ready') else 'low'} as last pushed"
 
     async def settle(self, ready: Snapshot, handshakes: int | None, timeout: float) -> Snapshot:
         if not self.subscription:
@@ -214,14 +258,25 @@ class OpcuaDriver(PollingDriver):
         return _snapshot(self._latest, time.monotonic())
 
     async def _wait_push(self, deadline: float, message: str) -> None:
-        self._changed.clear()
+        """Return at the next pushed value; raise TimeoutError(message) at `deadline`."""
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             raise TimeoutError(message)
+        # A bare future woken by value_changed: the waiting task resumes in the loop's next turn
+        # (an Event waited on through wait_for takes a task and two more turns).
+        loop = asyncio.get_running_loop()
+        waiter = self._push_waiter = loop.create_future()
+        timer = loop.call_later(remaining, _expire, waiter, message)
         try:
-            await asyncio.wait_for(self._changed.wait(), remaining)
-        except TimeoutError:
-            raise TimeoutError(message) from None
+            await waiter
+        finally:
+            timer.cancel()
+            self._push_waiter = None
+
+
+def _expire(waiter: asyncio.Future[None], message: str) -> None:
+    if not waiter.done():
+        waiter.set_exception(TimeoutError(message))
 
 
 def _number(value: Any, kind: type) -> Any:

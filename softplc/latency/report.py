@@ -120,6 +120,7 @@ def to_json(measurement: Measurement) -> dict[str, Any]:
         "ended": measurement.ended,
         "unreported": measurement.unreported,
         "foreign": measurement.foreign,
+        "stamps_lost": measurement.stamps_lost,
         "errors": measurement.errors,
         "complete": measurement.complete,
         "client_exit": measurement.client_exit,
@@ -259,6 +260,8 @@ def _print_details(run: Measurement, out: TextIO) -> None:
     counters = f"timeouts {run.timeouts} · missed {run.missed} · unreported {run.unreported}"
     if run.foreign:
         counters += f" · switches by another client {run.foreign}"
+    if run.stamps_lost:
+        counters += f" · no hi-res delay for {run.stamps_lost} (the PLC's next Ready overwrote ReadyStamp before the client read it)"
     if "unexpected_taskids" in run.plc_task:
         # programs/handshake.py: TaskIDs written while a task ran; Readys cleared without a new TaskID.
         counters += f" · PLC's Unexpected {run.plc_task['unexpected_taskids']} · BadAnswers {run.plc_task.get('ready_raised_again', 0)}"

@@ -64,6 +64,7 @@ class Measurement:
     missed: int = 0  # a Ready never answered, or an answer the PLC did not take
     unreported: int = 0  # answered, but the client died before reporting it
     foreign: int = 0  # switches the PLC counted that another client made
+    stamps_lost: int = 0  # samples without a hi-res delay: their ReadyStamp was overwritten before it was read
     errors: list[str] = field(default_factory=list)
     client_pid: int | None = None
     client_exit: int | None = None

@@ -59,7 +59,9 @@ def check_run(run: dict[str, Any], protocol: str, samples: int, *, hires: bool =
     assert run["ratio_to_thesis"]["mean"] == pytest.approx(plc["mean"] / 15.8)
     if hires:
         high = run["hires"]
-        assert high["samples"] == samples
+        # A sample whose ReadyStamp the PLC overwrote before the client read it has no hi-res delay
+        # (a client held up past the next task: a busy machine); it is counted, never miscounted.
+        assert high["samples"] == samples - run["stamps_lost"]
         # Ready → write acknowledged happens between the two scans that see it: 0 < hi-res < PLC delay + a scan.
         assert 0.0 < high["best"] and high["mean"] < plc["mean"] + 10.0
         assert run["notify"]["mean"] + run["respond"]["mean"] == pytest.approx(high["mean"], rel=1e-6)

@@ -17,6 +17,9 @@
   are served here with continuation points (browsing.py).
 - The session's user learns the client's address once its session is activated (writes carry
   it in their `Origin`, for the audit trail).
+- Read and Write, the services clients call most, are served here first: asyncua finds a
+  service by comparing the request's type with a freshly built NodeId per service in turn (17 for
+  a Write, ~15 µs of a Write's ~100 µs here); the service itself is asyncua's.
 - A session whose connection is lost keeps its subscriptions until it times out (asyncua, Part
   4: the client may come back with ActivateSession on a new connection); they go dormant at
   once, so a vanished client costs no work per tag change meanwhile (subscriptions.py). A
@@ -82,6 +85,8 @@ _CREATE_SESSION = ua.NodeId(ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBi
 _ACTIVATE_SESSION = ua.NodeId(ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary)
 _BROWSE = ua.NodeId(ua.ObjectIds.BrowseRequest_Encoding_DefaultBinary)
 _BROWSE_NEXT = ua.NodeId(ua.ObjectIds.BrowseNextRequest_Encoding_DefaultBinary)
+_READ = ua.NodeId(ua.ObjectIds.ReadRequest_Encoding_DefaultBinary)
+_WRITE = ua.NodeId(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary)
 
 
 class GuardedProcessor(UaProcessor):
@@ -100,6 +105,8 @@ class GuardedProcessor(UaProcessor):
     async def _process_message(self, typeid: ua.NodeId, requesthdr: Any, seqhdr: Any, body: Any) -> Any:
         if getattr(self._connection.security_policy, "discovery_only", False) and typeid not in _DISCOVERY:
             raise ServiceError(ua.StatusCodes.BadSecurityPolicyRejected)
+        if typeid == _WRITE or typeid == _READ:
+            return await self._read_or_write(typeid, requesthdr, seqhdr, body)
         if typeid in _REGISTRATION:  # we are no discovery server; asyncua would accept them without a session
             raise ServiceError(ua.StatusCodes.BadServiceUnsupported)
         if typeid == _CREATE_SESSION:
@@ -134,9 +141,8 @@ class GuardedProcessor(UaProcessor):
             # (no TCP reset). Nothing would ever close the connection; a live client reconnects.
             transport.close()
 
-    async def _browse(self, typeid: ua.NodeId, requesthdr: Any, seqhdr: Any, body: Buffer) -> bool:
-        """Browse and BrowseNext with continuation points (asyncua ignores RequestedMaxReferencesPerNode)."""
-        # The checks UaProcessor._process_message makes before any session service.
+    def _active_session(self, typeid: ua.NodeId, body: Buffer) -> Any:
+        """The session, after the checks UaProcessor._process_message makes before a session service."""
         session = self.session
         if session is None:
             raise ua.uaerrors.BadUserAccessDenied
@@ -145,6 +151,24 @@ class GuardedProcessor(UaProcessor):
             raise ua.uaerrors.BadUserAccessDenied
         self.session_last_activity = time.monotonic()
         session.touch()
+        if not session.is_activated():
+            raise ServiceError(ua.StatusCodes.BadSessionNotActivated)
+        return session
+
+    async def _read_or_write(self, typeid: ua.NodeId, requesthdr: Any, seqhdr: Any, body: Buffer) -> bool:
+        """Read and Write as asyncua 2.1.0 serves them, found without its search (see the module docstring)."""
+        session = self._active_session(typeid, body)
+        if typeid == _WRITE:
+            results = await session.write(struct_from_binary(ua.WriteParameters, body))
+            self.send_response(requesthdr.RequestHandle, seqhdr, ua.WriteResponse(Results=results))
+        else:
+            results = await session.read(struct_from_binary(ua.ReadParameters, body))
+            self.send_response(requesthdr.RequestHandle, seqhdr, ua.ReadResponse(Results=results))
+        return True
+
+    async def _browse(self, typeid: ua.NodeId, requesthdr: Any, seqhdr: Any, body: Buffer) -> bool:
+        """Browse and BrowseNext with continuation points (asyncua ignores RequestedMaxReferencesPerNode)."""
+        session = self._active_session(typeid, body)
         if self._continuation_session is not session:  # points belong to a session
             self._continuation_points, self._continuation_session = ContinuationPoints(), session
         points = self._continuation_points
