@@ -24,7 +24,6 @@ would flood them (or, idle, never send at all).
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import secrets
 import time
@@ -38,6 +37,7 @@ from softplc.hmi.expressions import ExpressionTable
 from softplc.hmi.fanout import Client, Encoder, Group
 from softplc.hmi.pacing import Pacer
 from softplc.hmi.sessions import Identity
+from softplc.hmi.untrusted import BadJson, clip, loads, shown
 from softplc.peers import PeerLog, peer_host
 from softplc.tagdb import TagDatabase
 from softplc.tags import Tag
@@ -278,9 +278,9 @@ class _Subscriber:
 
     def handle(self, text: str) -> None:
         try:
-            message = json.loads(text)
-        except ValueError:
-            self.client.control({"type": "error", "message": "not JSON"})
+            message = loads(text)
+        except BadJson as error:
+            self.client.control({"type": "error", "message": f"the message is {error}"})
             return
         kind = message.get("type") if isinstance(message, dict) else None
         if kind == "ping":
@@ -297,7 +297,7 @@ class _Subscriber:
         elif kind == "alarms":
             self._alarms(message.get("on", True))
         elif kind != "pong":
-            self.client.control({"type": "error", "message": f"unknown message type {kind!r}"})
+            self.client.control({"type": "error", "message": f"unknown message type {shown(kind)!r}"})
 
     def _alarms(self, on: Any) -> None:
         feed = self.hub.alarm_feed
@@ -322,7 +322,7 @@ class _Subscriber:
         self._last = time.monotonic()
         unknown = self.hub.subscribe(self.client, wanted)
         if unknown:
-            self.client.control({"type": "unknown", "items": unknown[:100], "count": len(unknown)})
+            self.client.control({"type": "unknown", "items": [clip(name) for name in unknown[:100]], "count": len(unknown)})
 
     def cancel(self) -> None:
         if self._joining is not None:

@@ -34,9 +34,11 @@ from softplc.hmi.sessions import Sessions
 from softplc.hmi.settings import HmiSettings, settings_problems
 from softplc.hmi.shell import Shell, builtin_pages
 from softplc.hmi.supervisory import add_supervisory
+from softplc.hmi.untrusted import clip
 from softplc.hmi.views import View, load_views
 from softplc.hmi.writelog import WriteLog
 from softplc.logins import PasswordLogins
+from softplc.peers import PeerLog, peer_host
 from softplc.users import UserStore
 from softplc.yamlsource import ConfigError
 
@@ -158,15 +160,29 @@ class HmiServer:
 
     def _application(self) -> web.Application:
         assert self.assets is not None
-        app = web.Application(middlewares=[middleware(self.origins)], client_max_size=MAX_REQUEST_BYTES)
+        api, door = Api(self), CommandDoor(self)
+        peer_log = PeerLog(log, service="HMI")
+
+        async def refused(request: web.Request, reason: str) -> None:
+            # As for a missing CSRF token: logged (rate-limited per address) and, for a write or a
+            # command, reported to the audit trail with what it asked for.
+            peer = peer_host(request.remote)
+            peer_log.warning(peer, "cross-origin requests refused", "HMI: %s %s from %s refused: %s", request.method,
+                             clip(request.path, 100), peer, reason, detail=reason)
+            if request.path == "/api/write":
+                await api.refuse_request(request, reason)
+            elif request.path.startswith("/api/commands/"):
+                await door.refuse_request(request, reason)
+
+        app = web.Application(middlewares=[middleware(self.origins, refused)], client_max_size=MAX_REQUEST_BYTES)
         index = self.assets / "index.html"
 
         async def page(request: web.Request) -> web.FileResponse:
             return web.FileResponse(index)
 
         app.add_routes([web.get("/", page), web.get("/index.html", page)])
-        app.add_routes(Api(self).routes())
-        app.add_routes(CommandDoor(self).routes())
+        app.add_routes(api.routes())
+        app.add_routes(door.routes())
         app.add_routes(JournalExport(self).routes())
         app.add_routes(self.shell.routes)
         app.router.add_static("/static/", self.assets, follow_symlinks=False)
