@@ -171,3 +171,62 @@ async def test_a_cross_origin_command_is_reported(plant: Plant) -> None:
     assert len(calls) == 1 and calls[0].command == "tags.force" and not calls[0].accepted
     assert "evil.example" in calls[0].detail and calls[0].arguments == {"tag": "limit", "value": 7}
     await asyncio.sleep(0)
+
+
+# -- item 5: live connections per address ---------------------------------------------------------
+
+async def test_one_address_cannot_take_every_live_connection(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.WARNING)
+    plant = await start_plant(tmp_path, max_clients=5, max_clients_per_address=2)
+    try:
+        async with http_client() as visitor, http_client() as operator, http_client() as engineer:
+            held = [await visitor.ws_connect(plant.url + "api/live") for _ in range(2)]
+            for ws in held:
+                await receive_until(ws, "hello")
+            for _ in range(5):  # a third visitor's tab from the same address is told why, clearly, every time
+                async with visitor.ws_connect(plant.url + "api/live") as refused:
+                    message = await refused.receive(timeout=5)
+                    assert message.type is aiohttp.WSMsgType.CLOSE and refused.close_code == 1013
+                    assert message.extra == "too many live connections from 127.0.0.1 (at most 2 per address without a login): close other tabs"
+            # A login counts on its own: the visitors' flood does not lock out an operator.
+            await http_login(operator, plant.url, "operator")
+            mine = [await operator.ws_connect(plant.url + "api/live") for _ in range(2)]
+            for ws in mine:
+                assert (await receive_until(ws, "hello"))["role"] == "operator"
+            # The runtime's own limit (max_clients: 5) is said as clearly.
+            await http_login(engineer, plant.url, "engineer")
+            async with engineer.ws_connect(plant.url + "api/live") as other:
+                await receive_until(other, "hello")
+                async with visitor.ws_connect(plant.url + "api/live") as refused:
+                    message = await refused.receive(timeout=5)
+                    assert refused.close_code == 1013 and "at most 5 live connections" in message.extra
+            for ws in [*held, *mine]:
+                await ws.close()
+        lines = [record.getMessage() for record in caplog.records if "live connection from" in record.getMessage()]
+        assert 1 <= len(lines) <= 2 and "refused: too many live connections" in lines[0], lines  # rate-limited per address
+    finally:
+        await plant.stop()
+
+
+# -- item 9: expressions current in every snapshot ------------------------------------------------
+
+async def snapshot_of(plant: Plant, items: list[str]) -> dict[str, Any]:
+    async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
+        await ws.send_json({"type": "subscribe", "items": items})
+        return (await receive_until(ws, "snapshot"))["values"]
+
+
+async def test_an_expression_is_current_in_a_snapshot_after_changes_nobody_watched(plant: Plant) -> None:
+    from hmi_support import wait_until
+
+    alarm, running = "=t01_iBL >= 80", "=_sys.state == 'RUNNING'"
+    await wait_until(lambda: plant.db.value("_sys.state") == "RUNNING", message="the runtime running")
+    for items, level in ((90, 90.0), (10, 10.0), (85, 85.0)):
+        await wait_until(lambda: not plant.hmi.hub.groups, message="no browser watching")
+        plant.drive(t01_iBM=items)
+        await wait_until(lambda: plant.db.value("t01_iBL") == level, message=f"level {level}")
+        await asyncio.sleep(0.05)  # the change has gone past the live channel (nobody watching)
+        values = await snapshot_of(plant, [alarm, running, "t01_iBL"])
+        assert values["t01_iBL"] == level
+        assert values[alarm] is (level >= 80), (level, values)
+        assert values[running] is True, values

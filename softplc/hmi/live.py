@@ -54,19 +54,23 @@ MAX_MESSAGE = 2 * 1024 * 1024  # bytes of one client message (a subscription of 
 SUBSCRIBE_INTERVAL = 0.1  # s: a client changing its subscription faster gets the last one it asked for
 SILENCE = 2.5  # heartbeats without a word before a peer is taken for gone
 DISPATCH_SLICE = 1000  # changed tags sorted into groups per turn (~0.3 ms)
+TRY_AGAIN_LATER = 1013  # WebSocket close code of a refused connection (RFC 6455 registry: "Try Again Later")
+MAX_CLOSE_REASON = 123  # bytes of a close frame's reason
 
 
 class Hub:
     """Every live client, grouped by what they watch; pushes changed values to them."""
 
     def __init__(self, db: TagDatabase, expressions: ExpressionTable, clock: Clock, *, rate: float, heartbeat: float,
-                 max_clients: int, drop_after: float | None = None) -> None:
+                 max_clients: int, max_clients_per_address: int | None = None, drop_after: float | None = None) -> None:
         self.db = db
         self.expressions = expressions
         self.clock = clock
         self.rate = rate
         self.heartbeat = heartbeat
         self.max_clients = max_clients
+        self.max_clients_per_address = max_clients_per_address or max_clients
+        self._holders: dict[tuple[str, str], int] = {}  # ("address", host) or ("login", token) → live connections
         self.drop_after = drop_after if drop_after is not None else max(10.0, 5 * heartbeat)
         self.instance = secrets.token_hex(8)  # a new one per start: pages notice the runtime restarted
         self.clients: set[Client] = set()
@@ -135,6 +139,7 @@ class Hub:
             self._wake.clear()
             batches, self._incoming = self._incoming, []
             if not self.groups:  # no browser watches anything: no turns to take
+                self.expressions.stale = True  # ... but the expressions missed these changes
                 continue
             due: dict[Group, None] = {}
             for tags in batches:
@@ -176,6 +181,8 @@ class Hub:
 
     def subscribe(self, client: Client, names: list[str]) -> list[str]:
         """Move the client to the group of `names` (known ones); returns the unknown ones."""
+        if self.expressions.stale:
+            self.expressions.refresh()  # tags changed while nobody watched: the snapshot must be current
         known = [name for name in names if self.known(name)]
         unknown = [name for name in names if not self.known(name)]
         key = (frozenset(known), self.rate)
@@ -233,16 +240,41 @@ class Hub:
     # -- the WebSocket endpoint -----------------------------------------------------------------
 
     async def handle(self, request: web.Request, identity: Identity, origins: OriginPolicy, sessions: Sessions) -> web.StreamResponse:
-        """GET /api/live: checks done by the caller (identity); here the Origin and the client limit."""
+        """GET /api/live: checks done by the caller (identity); here the Origin and the connection limits."""
         origin = request.headers.get("Origin")
+        peer = peer_host(request.remote)
         if origin is not None and not origins.allowed(origin, request):
-            self.peer_log.warning(peer_host(request.remote), "refused live origins", "HMI: live connection from %s refused: origin %s",
-                                  request.remote, origin, detail=origin)
+            self.peer_log.warning(peer, "refused live origins", "HMI: live connection from %s refused: origin %s",
+                                  request.remote, clip(origin, 100), detail=clip(origin, 100))
             raise web.HTTPForbidden(text="cross-origin WebSocket refused")
+        # A visitor without a login counts by address, a login by itself: an anonymous flood from
+        # this computer cannot lock out an operator who logs in.
+        holder = ("login", identity.session.token) if identity.session is not None else ("address", peer)
+        refusal = None
         if len(self.clients) >= self.max_clients:
-            raise web.HTTPServiceUnavailable(text=f"at most {self.max_clients} live connections")
+            plural = "s" if self.max_clients != 1 else ""
+            refusal = f"the runtime serves at most {self.max_clients} live connection{plural} at once; try again later"
+        elif self._holders.get(holder, 0) >= self.max_clients_per_address:
+            refusal = (f"too many live connections from {clip(peer, 45)} (at most {self.max_clients_per_address} "
+                       f"{'per login' if identity.session is not None else 'per address without a login'}): close other tabs")
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, compress=False, autoping=True)
         await ws.prepare(request)
+        if refusal is not None:
+            # Accepted only to be closed with the reason: a browser never sees the body of a refused
+            # handshake (it reports 1006, "connection lost"), but it does see a close frame's reason.
+            self.peer_log.warning(peer, "refused live connections", "HMI: live connection from %s refused: %s", peer, refusal)
+            reason = refusal.encode()[:MAX_CLOSE_REASON].decode("utf-8", "ignore").encode()  # whole characters only
+            await ws.close(code=TRY_AGAIN_LATER, message=reason)
+            return ws
+        self._holders[holder] = self._holders.get(holder, 0) + 1
+        try:
+            return await self._serve(request, ws, identity)
+        finally:
+            left = self._holders.pop(holder) - 1
+            if left:
+                self._holders[holder] = left
+
+    async def _serve(self, request: web.Request, ws: web.WebSocketResponse, identity: Identity) -> web.WebSocketResponse:
         client = Client(ws, request.transport, identity, str(request.remote), self.encoder, self.pacer)
         self.clients.add(client)
         client.start()

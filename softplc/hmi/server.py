@@ -95,7 +95,7 @@ class HmiServer:
         conditions = {key: condition for view in self.views.values() for key, condition in view.expressions.items()}
         self.expressions = ExpressionTable(db, conditions, runtime.clock.wall)
         self.hub = Hub(db, self.expressions, runtime.clock, rate=settings.max_update_rate, heartbeat=settings.heartbeat,
-                       max_clients=settings.max_clients)
+                       max_clients=settings.max_clients, max_clients_per_address=settings.max_clients_per_address)
         self.origins = OriginPolicy(settings.allowed_origins, extra_hosts=(settings.host.lower(),))
         self.shell.pages[:0] = builtin_pages(self.plant.has_fleet, [(view.name, view.title) for view in self.views.values()])
         add_supervisory(self.shell, runtime.commands, self.assets)  # alarms, journal, trends: when the runtime has them
