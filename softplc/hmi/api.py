@@ -391,7 +391,11 @@ class Api:
 
     async def diagnostics(self, request: web.Request) -> web.Response:
         self.who(request)
-        return web.json_response({"live": self.server.hub.stats(), "sessions": len(self.server.sessions)})
+        try:
+            since = float(request.query.get("since", 0.0))  # monotonic seconds: the delivery figures of frames sent since
+        except ValueError:
+            raise web.HTTPBadRequest(text="since is a number of seconds (time.monotonic())") from None
+        return web.json_response({"live": self.server.hub.stats(since), "sessions": len(self.server.sessions)})
 
     async def live(self, request: web.Request) -> web.StreamResponse:
         identity = self.who(request)

@@ -6,14 +6,15 @@ Protocol (JSON text messages; docs/hmi.md):
     client → {"type": "subscribe", "items": ["t01_iBL", "=t01_iBL > 90", ...]}   (replaces the set)
     server → {"type": "snapshot", "time": 1767225600.1, "values": {"t01_iBL": 42.0, ...}, "done": true}
     server → {"type": "update", "time": T, "values": {...}, "times": {...}, "quality": {...}}
-             only changed items, at most `rate` per second (fanout.py: the wire format)
+             only changed items, sent at once, each value at most `rate` times a second (fanout.py)
+    server → {"type": "thinned", "updates": N, "message": ...}   a slow client's updates were merged
     client → {"type": "alarms", "on": true}   alarm snapshot, then alarm changes (alarm_feed.py)
     both   → {"type": "ping"} every `heartbeat` seconds; each side drops a peer silent for 2.5 of them
 
 The scan is never held up: `db.on_change` only hands the list of changed tags to a dispatcher
-task, which marks the subscribed groups; each group encodes its update once, in chunks. Each
-slice of that work is one *turn* of pacing.py: one at a time, never into a scan cycle due
-within 5 ms.
+task, which notes them in the groups that watch them; each group encodes its update once, in
+chunks. Each slice of that work is one *turn* of pacing.py: one at a time, never into a scan
+cycle due within 5 ms. How late the values go out is recorded (delivery.py).
 
 Pacing (rate limit, heartbeats, slow-client drop) is in real time even under `--sim --speed N`:
 it protects the network and the browser, which live in real time. Paced on the simulated clock,
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import secrets
 import time
 from collections.abc import Sequence
@@ -34,7 +36,8 @@ from aiohttp import WSMsgType, web
 
 from softplc.clock import Clock
 from softplc.hmi.expressions import ExpressionTable
-from softplc.hmi.fanout import Client, Encoder, Group
+from softplc.hmi.delivery import DeliveryRecord
+from softplc.hmi.fanout import Client, Encoder, Frame, Group
 from softplc.hmi.pacing import Pacer
 from softplc.hmi.sessions import Identity
 from softplc.hmi.untrusted import BadJson, clip, loads, shown
@@ -76,8 +79,8 @@ class Hub:
         self.clients: set[Client] = set()
         self.groups: dict[tuple[frozenset[str], float], Group] = {}
         self.pacer = Pacer(clock)
-        self.encoder = Encoder(self._lookup, self.pacer)
-        self._watchers: dict[str, list[Group]] = {}
+        self.encoder = Encoder(self.pacer)
+        self.delivery = DeliveryRecord()
         self._incoming: list[Sequence[Tag]] = []
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
@@ -111,13 +114,15 @@ class Hub:
                 group.task.cancel()
         self.clients.clear()
         self.groups.clear()
-        self._watchers.clear()
 
-    def stats(self) -> dict[str, Any]:
+    def stats(self, since: float = 0.0) -> dict[str, Any]:
+        """Figures of the live channel; `delivery`: the ages of the values sent since `since` (delivery.py)."""
         return {
             "clients": len(self.clients),
             "groups": len(self.groups),
             "frames_sent": sum(client.sent_frames for client in self.clients),
+            "thinned": sum(client.thinned for client in self.clients),
+            "delivery": self.delivery.summary(since),
             "bytes_sent": sum(client.sent_bytes for client in self.clients),
             "messages_encoded": self.encoder.messages,
             "encode_seconds": round(self.encoder.seconds, 4),
@@ -141,41 +146,37 @@ class Hub:
             if not self.groups:  # no browser watches anything: no turns to take
                 self.expressions.stale = True  # ... but the expressions missed these changes
                 continue
-            due: dict[Group, None] = {}
             for tags in batches:
                 for start in range(0, len(tags), DISPATCH_SLICE):
                     async with self.pacer.turn():
-                        self._sort(tags[start:start + DISPATCH_SLICE], due)
-                async with self.pacer.turn():
-                    begun = time.thread_time()
-                    for item in self.expressions.changed(tags):
-                        for group in self._watchers.get(item.name, ()):
-                            group.mark(item.name)
-                            due[group] = None
-                    self.dispatch_seconds += time.thread_time() - begun
-            for group in due:
+                        self._sort(tags[start:start + DISPATCH_SLICE])
+
+    def _sort(self, tags: Sequence[Tag]) -> None:
+        """Note the changed tags (and the expressions that read them) in the groups that watch them.
+
+        Set intersections of the objects themselves: C speed, not a Python loop per tag; the
+        per-value rate limit (`Group.note`) then loops over what each group watches only.
+        """
+        begun = time.thread_time()
+        changed: set[Any] = set(tags)
+        changed.update(self.expressions.changed(changed))
+        now = time.monotonic()
+        for group in self.groups.values():
+            watched = changed & group.members
+            if watched:
+                group.note(watched, now)
                 if group.task is None and group.clients:
                     group.task = asyncio.create_task(group.run(self.pacer), name="hmi-group")
-
-    def _sort(self, tags: Sequence[Tag], due: dict[Group, None]) -> None:
-        """Mark the changed tags in the groups that watch them (set intersections: C speed, not a loop per tag)."""
-        if not self.groups:
-            return
-        begun = time.thread_time()
-        changed = {tag.name for tag in tags}
-        for group in self.groups.values():
-            watched = changed & group.members_of
-            if watched:
-                group.mark_all(watched)
-                due[group] = None
         self.dispatch_seconds += time.thread_time() - begun
 
-    def _lookup(self, name: str) -> Any:
+    def _sent(self, frame: Frame) -> None:
+        """A client's frame went out: how old was its oldest value (the server's part of the latency)."""
+        if frame.oldest != math.inf and not self.clock.simulated:
+            self.delivery.add(self.clock.wall() - frame.oldest)
+
+    def _item(self, name: str) -> Any:
         tag = self.db.get(name)
         return tag if tag is not None else self.expressions.get(name)
-
-    def known(self, name: str) -> bool:
-        return name in self.db or name in self.expressions
 
     # -- clients --------------------------------------------------------------------------------
 
@@ -183,15 +184,13 @@ class Hub:
         """Move the client to the group of `names` (known ones); returns the unknown ones."""
         if self.expressions.stale:
             self.expressions.refresh()  # tags changed while nobody watched: the snapshot must be current
-        known = [name for name in names if self.known(name)]
-        unknown = [name for name in names if not self.known(name)]
-        key = (frozenset(known), self.rate)
+        found = {name: self._item(name) for name in names}
+        unknown = [name for name, item in found.items() if item is None]
+        key = (frozenset(name for name, item in found.items() if item is not None), self.rate)
         self._leave(client)
         group = self.groups.get(key)
         if group is None:
-            group = self.groups[key] = Group(key, self.encoder)
-            for name in key[0]:
-                self._watchers.setdefault(name, []).append(group)
+            group = self.groups[key] = Group(key, (item for item in found.values() if item is not None), self.encoder)
         group.clients.add(client)
         client.group = group
         client.resynchronise()
@@ -205,12 +204,6 @@ class Hub:
         group.clients.discard(client)
         if not group.clients:
             del self.groups[group.key]
-            for name in group.key[0]:
-                watching = self._watchers.get(name)
-                if watching is not None:
-                    watching.remove(group)
-                    if not watching:
-                        del self._watchers[name]
             if group.task is not None:
                 group.task.cancel()
 
@@ -231,6 +224,11 @@ class Hub:
                     self._drop(client, f"more than {self.drop_after:.0f} s behind (too slow to read its updates)")
                 elif ping:
                     client.control({"type": "ping"})
+                if client.thinned > client.thinned_told:  # told at most once a tick, never silently
+                    skipped, client.thinned_told = client.thinned - client.thinned_told, client.thinned
+                    client.control({"type": "thinned", "updates": skipped, "message":
+                                    f"this connection could not take every update: {skipped} were merged into later ones "
+                                    "(each value shown is still the latest)"})
 
     def _drop(self, client: Client, why: str) -> None:
         self.dropped += 1
@@ -275,7 +273,7 @@ class Hub:
                 self._holders[holder] = left
 
     async def _serve(self, request: web.Request, ws: web.WebSocketResponse, identity: Identity) -> web.WebSocketResponse:
-        client = Client(ws, request.transport, identity, str(request.remote), self.encoder, self.pacer)
+        client = Client(ws, request.transport, identity, str(request.remote), self.encoder, self.pacer, self._sent)
         self.clients.add(client)
         client.start()
         client.control({"type": "hello", "instance": self.instance, "heartbeat": self.heartbeat, "rate": self.rate,

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
-DEFAULT_UPDATE_RATE = 10.0  # updates per second and client (FUXA polls every 1-3 s; a screen refreshes at 60)
+DEFAULT_UPDATE_RATE = 10.0  # updates of each value per second and client (FUXA polls every 1-3 s; a screen refreshes at 60)
 DEFAULT_HEARTBEAT = 2.0  # s between heartbeats each way; a silent peer is gone after 2.5 of them
 DEFAULT_SESSION_TIMEOUT = 8 * 3600.0  # idle seconds before a login expires (one shift)
 DEFAULT_MAX_CLIENTS = 100  # live connections at once; more are refused (each costs memory and a send per update)
@@ -51,7 +51,7 @@ HMI_SERVER: dict[str, Any] = {
             "required": ["certificate", "private_key"],
             "additionalProperties": False,
         },
-        "max_update_rate": {"type": "number", "minimum": 0.2, "maximum": 100, "description": "Most live updates per second sent to one browser (default 10)."},
+        "max_update_rate": {"type": "number", "minimum": 0.2, "maximum": 100, "description": "Most live updates of each value per second sent to one browser (default 10)."},
         "heartbeat": {**_DURATION, "description": "Interval of the live channel's heartbeats (default 2s); a silent peer is dropped after 2.5 intervals."},
         "session_timeout": {**_DURATION, "description": "A login expires after this long without a request (default 8h)."},
         "max_clients": {"type": "integer", "minimum": 1, "maximum": 10000, "description": "Most live connections at once (default 100)."},
