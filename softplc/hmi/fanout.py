@@ -231,7 +231,11 @@ class Client:
                         await self._send(self._control.pop(0))
                     if self._full and self.group is not None:
                         self._full = False
-                        self._enqueue(await self.group.snapshot())
+                        snapshot = await self.group.snapshot()
+                        # Frames offered while it was encoded go after it: they carry changes at
+                        # least as new, and any later change comes in a later frame still.
+                        self._queue.appendleft(snapshot)
+                        self.queued_bytes += snapshot.size
                     while self._queue:
                         frame = self._queue.popleft()
                         self.queued_bytes -= frame.size

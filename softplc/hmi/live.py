@@ -30,6 +30,7 @@ import math
 import secrets
 import time
 from collections.abc import Sequence
+from itertools import chain
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSMsgType, web
@@ -65,7 +66,8 @@ class Hub:
     """Every live client, grouped by what they watch; pushes changed values to them."""
 
     def __init__(self, db: TagDatabase, expressions: ExpressionTable, clock: Clock, *, rate: float, heartbeat: float,
-                 max_clients: int, max_clients_per_address: int | None = None, drop_after: float | None = None) -> None:
+                 max_clients: int, max_clients_per_address: int | None = None, drop_after: float | None = None,
+                 pacer: Pacer | None = None) -> None:
         self.db = db
         self.expressions = expressions
         self.clock = clock
@@ -78,7 +80,7 @@ class Hub:
         self.instance = secrets.token_hex(8)  # a new one per start: pages notice the runtime restarted
         self.clients: set[Client] = set()
         self.groups: dict[tuple[frozenset[str], float], Group] = {}
-        self.pacer = Pacer(clock)
+        self.pacer = pacer or Pacer(clock)
         self.encoder = Encoder(self.pacer)
         self.delivery = DeliveryRecord()
         self._incoming: list[Sequence[Tag]] = []
@@ -146,10 +148,11 @@ class Hub:
             if not self.groups:  # no browser watches anything: no turns to take
                 self.expressions.stale = True  # ... but the expressions missed these changes
                 continue
-            for tags in batches:
-                for start in range(0, len(tags), DISPATCH_SLICE):
-                    async with self.pacer.turn():
-                        self._sort(tags[start:start + DISPATCH_SLICE])
+            # The batches of several scans (each commits its own) share a turn: fewer, fuller turns.
+            changed = batches[0] if len(batches) == 1 else list(chain.from_iterable(batches))
+            for start in range(0, len(changed), DISPATCH_SLICE):
+                async with self.pacer.turn():
+                    self._sort(changed[start:start + DISPATCH_SLICE])
 
     def _sort(self, tags: Sequence[Tag]) -> None:
         """Note the changed tags (and the expressions that read them) in the groups that watch them.

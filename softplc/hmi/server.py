@@ -28,6 +28,7 @@ from softplc.hmi.assets import AssetsNotFound, find_assets
 from softplc.hmi.expressions import ExpressionTable
 from softplc.hmi.live import Hub
 from softplc.hmi.operations import install_operations
+from softplc.hmi.pacing import pacer_for
 from softplc.hmi.plant import PlantModel
 from softplc.hmi.security import OriginPolicy, middleware
 from softplc.hmi.sessions import Sessions
@@ -95,7 +96,8 @@ class HmiServer:
         conditions = {key: condition for view in self.views.values() for key, condition in view.expressions.items()}
         self.expressions = ExpressionTable(db, conditions, runtime.clock.wall)
         self.hub = Hub(db, self.expressions, runtime.clock, rate=settings.max_update_rate, heartbeat=settings.heartbeat,
-                       max_clients=settings.max_clients, max_clients_per_address=settings.max_clients_per_address)
+                       max_clients=settings.max_clients, max_clients_per_address=settings.max_clients_per_address,
+                       pacer=pacer_for(runtime))
         self.origins = OriginPolicy(settings.allowed_origins, extra_hosts=(settings.host.lower(),))
         self.shell.pages[:0] = builtin_pages(self.plant.has_fleet, [(view.name, view.title) for view in self.views.values()])
         add_supervisory(self.shell, runtime.commands, self.assets)  # alarms, journal, trends: when the runtime has them
