@@ -230,3 +230,18 @@ async def test_an_expression_is_current_in_a_snapshot_after_changes_nobody_watch
         assert values["t01_iBL"] == level
         assert values[alarm] is (level >= 80), (level, values)
         assert values[running] is True, values
+
+
+async def test_deeply_nested_json_to_the_opc_ua_commands_door_is_an_invalid_argument(tmp_path: Path) -> None:
+    """The same commands through OPC UA (Objects/Commands.Call, JSON arguments): BadInvalidArgument, not BadInternalError."""
+    from asyncua import ua
+
+    from audit_support import opcua_client
+
+    async with running(tmp_path) as runtime:
+        async with opcua_client(runtime, "engineer") as client:
+            ns = await client.get_namespace_index("urn:softplc:tags")
+            door = client.get_node(ua.NodeId("Commands", ns))
+            with pytest.raises(ua.UaStatusCodeError) as refused:
+                await door.call_method(ua.NodeId("Commands.Call", ns), "tags.force", "[" * DEEP + "]" * DEEP)
+    assert ua.StatusCode(refused.value.code).name == "BadInvalidArgument"
