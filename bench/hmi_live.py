@@ -192,7 +192,8 @@ async def ws_clients(url: str, items_file: str, count: int, seconds: float) -> N
                 if data.startswith('{"type":"update"'):
                     figures = seconds_seen.setdefault(int(now), [0, 0, 0])
                     figures[0] += 1
-                    figures[1] += data.count('"l')  # the load tags' names (l0001_v ...): no full parse needed
+                    start = data.index('"values":{')
+                    figures[1] += data.count('"l', start, data.index("}", start))  # the load tags (l0001_v ...) among the values
                     figures[2] += len(data)
                     if (found := PROBE.search(data)) and found.group(1) not in probes:
                         probes[found.group(1)] = now

@@ -259,8 +259,9 @@ class Client:
 
     async def _send(self, data: bytes) -> None:
         # Not a turn: writing an encoded frame costs microseconds, and waiting for a slow
-        # client's socket to drain must not hold up the others. A due scan cycle goes first.
-        await self._pacer.ready()
+        # client's socket to drain must not hold up the others. A due scan cycle goes first;
+        # otherwise no extra trip round the loop (ten clients at 100 frames a second: 1,000 trips).
+        await self._pacer.clear()
         await self.ws.send_frame(data, WSMsgType.TEXT)
         self.sent_frames += 1
         self.sent_bytes += len(data)

@@ -72,6 +72,13 @@ class Pacer:
             await self.clock.sleep(0)
             return
         await asyncio.sleep(0)
+        await self.clear()
+
+    async def clear(self) -> None:
+        """Return at once unless a scan cycle is due within the margin; then once it has run (no yield otherwise)."""
+        if self.until_release is None:
+            await self.ready()
+            return
         for _ in range(LOOKS):
             if self.until_release() > self.margin:
                 return
