@@ -107,3 +107,24 @@ async def test_pacing_is_real_time_under_a_fast_simulated_clock(tmp_path: Path) 
         assert updates <= 2 * 22  # and the messages no more than the values they carry
     finally:
         await plant.stop()
+
+
+async def test_a_group_that_falls_behind_tells_its_clients_they_are_thinned(tmp_path: Path) -> None:
+    """The runtime cannot send every change in time (here: its loop blocked for 0.3 s): the client is told, not silently thinned."""
+    plant = await start_plant(tmp_path, heartbeat=0.5)
+    try:
+        async with aiohttp.ClientSession() as session, session.ws_connect(plant.url + "api/live") as ws:
+            await ws.send_json({"type": "subscribe", "items": ["counter"]})
+            await receive_until(ws, "snapshot")
+            await receive_until(ws, "update")
+            group = next(iter(plant.hmi.hub.groups.values()))
+            late = group.late
+            # A change free to go, then the loop held past a whole period: that update goes out late.
+            while group.late == late:
+                plant.drive(limit=float(group.late + time.monotonic() % 50))
+                await asyncio.sleep(0.05)
+                time.sleep(0.3)  # on purpose, blocking: the runtime busy elsewhere
+            thinned = await receive_until(ws, "thinned", timeout=5)
+            assert thinned["late"] >= 1 and "could not send every change in time" in thinned["message"]
+    finally:
+        await plant.stop()

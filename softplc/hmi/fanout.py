@@ -144,6 +144,7 @@ class Client:
         self.sent_bytes = 0
         self.thinned = 0  # frames merged into later values because the client was too slow to take them
         self.thinned_told = 0  # of those, how many it has been told about
+        self.late_told = 0  # its group's late frames it has been told about
         self.queued_bytes = 0
         self._encoder = encoder
         self._pacer = pacer
@@ -292,8 +293,10 @@ class Group:
         self.clients: set[Client] = set()
         self.task: asyncio.Task[None] | None = None
         self.frames = 0
+        self.late = 0  # frames that went out more than a period after their first item was free to go: values thinned
         self._encoder = encoder
         self._ready: dict[Any, None] = {}  # changed items free to go in the next frame
+        self._ready_since: float | None = None  # when the first of them was free to go
         self._due: dict[Any, float] = {}  # item → theoretical time (monotonic) of its next send
         self._waiting: dict[int, dict[Any, None]] = {}  # FRAME_GAP slot (time // FRAME_GAP, rounded up) → items free from then
         self._last_frame_at = -math.inf
@@ -319,6 +322,8 @@ class Group:
                 if bucket is None:
                     bucket = waiting[slot] = {}
                 bucket[item] = None
+        if ready and self._ready_since is None:
+            self._ready_since = now
         self._version += 1
         self._wake.set()
 
@@ -342,6 +347,8 @@ class Group:
                 if waiting:
                     for slot in [slot for slot in waiting if slot * FRAME_GAP <= now]:
                         self._ready.update(waiting.pop(slot))
+                        if self._ready_since is None:
+                            self._ready_since = slot * FRAME_GAP
                 if self._ready:
                     gap = self._last_frame_at + FRAME_GAP - now
                     if gap > 0:
@@ -365,6 +372,9 @@ class Group:
         """Encode what is ready into one frame and offer it to every client."""
         items, self._ready = list(self._ready), {}
         at = self._last_frame_at = time.monotonic()
+        if self._ready_since is not None and at - self._ready_since > self.period:
+            self.late += 1  # the runtime fell behind: changes of a whole period were merged (its clients are told)
+        self._ready_since = None
         due, period = self._due, self.period
         for item in items:
             next_send = due.get(item, 0.0)

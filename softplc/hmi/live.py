@@ -196,6 +196,7 @@ class Hub:
             group = self.groups[key] = Group(key, (item for item in found.values() if item is not None), self.encoder)
         group.clients.add(client)
         client.group = group
+        client.late_told = group.late  # told of its new group's lateness from now on
         client.resynchronise()
         return unknown
 
@@ -227,11 +228,21 @@ class Hub:
                     self._drop(client, f"more than {self.drop_after:.0f} s behind (too slow to read its updates)")
                 elif ping:
                     client.control({"type": "ping"})
-                if client.thinned > client.thinned_told:  # told at most once a tick, never silently
-                    skipped, client.thinned_told = client.thinned - client.thinned_told, client.thinned
-                    client.control({"type": "thinned", "updates": skipped, "message":
-                                    f"this connection could not take every update: {skipped} were merged into later ones "
-                                    "(each value shown is still the latest)"})
+                self._tell_thinned(client)
+
+    @staticmethod
+    def _tell_thinned(client: Client) -> None:
+        """Tell a client, at most once a tick, that it got fewer updates than the rate: never thinned silently."""
+        late = client.group.late if client.group is not None else 0
+        merged, behind = client.thinned - client.thinned_told, late - client.late_told
+        if merged <= 0 and behind <= 0:
+            client.late_told = late  # a new group's count
+            return
+        client.thinned_told, client.late_told = client.thinned, late
+        why = (f"this connection could not take every update: {merged} were merged into later ones" if merged > 0 else
+               f"the runtime could not send every change in time: {behind} updates were late and merged")
+        client.control({"type": "thinned", "updates": merged, "late": max(behind, 0),
+                        "message": f"{why} (each value shown is still the latest)"})
 
     def _drop(self, client: Client, why: str) -> None:
         self.dropped += 1
