@@ -17,8 +17,9 @@ apart so a slow browser on a busy machine is not blamed on the server, nor the o
   of every frame sent to every client: its oldest value's commit → the frame handed to the socket;
 - **wire**: probe written over Modbus → the frame carrying it received by the other clients,
   and the stamp's age when received (scan → another process read it);
-- **page**: probe written → its text in the page's DOM (MutationObserver, clocks aligned by round
-  trip), the stamp's age when shown, and frame received by the page → DOM;
+- **page**: probe written → its text in the page's DOM (MutationObserver; the page's Date.now()
+  is the wall clock this script and the runtime read), the stamp's age when shown, and frame
+  received by the page → DOM;
 - **rate**: per client, the values of each load tag received per second (the tags change 10
   times a second: every client should see min(rate, 10) of them, or be told it is thinned), the
   messages a second, and the "thinned" notices;
@@ -210,9 +211,11 @@ async def ws_clients(url: str, items_file: str, count: int, seconds: float) -> N
 
 # -- the measurement ------------------------------------------------------------------------------
 
-def cpu_seconds(pid: int) -> float:
+def cpu_seconds(pid: int) -> tuple[float, float]:
+    """(user, system) CPU seconds of a process."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    tick = os.sysconf("SC_CLK_TCK")
+    return int(fields[11]) / tick, int(fields[12]) / tick
 
 
 def percentiles(values: list[float]) -> str:
@@ -227,13 +230,14 @@ def p95(values: list[float]) -> float:
 
 
 PAGE_RECORDER = """() => {
-    // Frames as the page's live channel receives them (before parsing), and the DOM changes of probe and stamp.
+    // Frames as the page's live channel receives them (before parsing), and the DOM changes of probe and
+    // stamp, at Date.now(): the wall clock this script and the runtime read too.
     window.__probe = []; window.__stamp = []; window.__frameProbe = {}; window.__frameStamp = {};
     window.__thinned = 0; window.__values = 0;
     const live = window.softplcHmi.live;
     const receive = live._receive.bind(live);
     live._receive = (text) => {
-        const at = performance.timeOrigin + performance.now();
+        const at = Date.now();
         const probe = /"probe":(\\d+)/.exec(text), stamp = /"stamp":([0-9.]+)/.exec(text);
         if (probe && !(probe[1] in window.__frameProbe)) window.__frameProbe[probe[1]] = at;
         if (stamp) window.__frameStamp[Number(stamp[1]).toFixed(3)] = at;
@@ -242,7 +246,7 @@ PAGE_RECORDER = """() => {
     };
     for (const [id, list] of [['probe_text', window.__probe], ['stamp_text', window.__stamp]]) {
         const node = document.getElementById(id);
-        new MutationObserver(() => list.push([node.textContent, performance.timeOrigin + performance.now()]))
+        new MutationObserver(() => list.push([node.textContent, Date.now()]))
             .observe(node, {subtree: true, childList: true, characterData: true});
     }
 }"""
@@ -308,7 +312,8 @@ async def main(args: argparse.Namespace) -> None:
         await asyncio.sleep(0.6)  # statistics are published every 0.5 s
         result: dict[str, object] = dict(await figures())
         elapsed = wall1 - wall0
-        result.update(cpu=(cpu1 - cpu0) / elapsed, start=start, end=end, delivery=hub1.get("delivery"),
+        result.update(cpu=(sum(cpu1) - sum(cpu0)) / elapsed, system=(cpu1[1] - cpu0[1]) / elapsed, start=start, end=end,
+                      delivery=hub1.get("delivery"),
                       hmi_work=((hub1["encode_seconds"] - hub0["encode_seconds"]) + (hub1["dispatch_seconds"] - hub0["dispatch_seconds"])) / elapsed,
                       encode=(hub1["encode_seconds"] - hub0["encode_seconds"]) / elapsed,
                       messages=(hub1["messages_encoded"] - hub0["messages_encoded"]) / elapsed,
@@ -342,13 +347,6 @@ async def main(args: argparse.Namespace) -> None:
                                     items)
                 await page.wait_for_function("(count) => window.__updates >= count", arg=args.tags, timeout=60000)
             await page.evaluate(PAGE_RECORDER)
-            offsets = []  # the page's clock minus ours, from the quickest of several round trips
-            for _ in range(20):
-                before = time.time()
-                page_now = await page.evaluate("() => performance.timeOrigin + performance.now()")
-                after = time.time()
-                offsets.append((after - before, page_now - (before + after) / 2 * 1000))
-            offset = min(offsets)[1]
             waited = time.monotonic()
             while (await diagnostics())["clients"] < args.clients + 1 and time.monotonic() - waited < 120:
                 await asyncio.sleep(0.5)  # every client connected before the window opens
@@ -372,7 +370,7 @@ async def main(args: argparse.Namespace) -> None:
             probe_seen, stamp_seen, frame_probe, frame_stamp, page_thinned = seen
             await browser.close()
         reports = [client for process in clients for client in json.loads(process.communicate(timeout=total + 30)[0])]
-        report(args, baseline, loaded, reports, written, probe_seen, stamp_seen, frame_probe, frame_stamp, page_thinned, page_values, offset)
+        report(args, baseline, loaded, reports, written, probe_seen, stamp_seen, frame_probe, frame_stamp, page_thinned, page_values)
     finally:
         await http.close()
         modbus.close()
@@ -384,8 +382,7 @@ async def main(args: argparse.Namespace) -> None:
 
 
 def report(args: argparse.Namespace, baseline: dict, loaded: dict, reports: list[dict], written: dict[int, float],
-           probe_seen: list, stamp_seen: list, frame_probe: dict, frame_stamp: dict, page_thinned: int, page_values: list[float],
-           offset: float) -> None:
+           probe_seen: list, stamp_seen: list, frame_probe: dict, frame_stamp: dict, page_thinned: int, page_values: list[float]) -> None:
     """Print the figures and a line per goal."""
     start, end = loaded["start"], loaded["end"]
     seconds = end - start
@@ -393,10 +390,10 @@ def report(args: argparse.Namespace, baseline: dict, loaded: dict, reports: list
     probe_dom: dict[int, float] = {}
     for text, at in probe_seen:
         if text.isdigit() and int(text) not in probe_dom:
-            probe_dom[int(text)] = at - offset
+            probe_dom[int(text)] = at
     write_to_dom = [probe_dom[value] - at for value, at in written.items() if value in probe_dom]
-    frame_to_dom = [shown + offset - frame_probe[str(value)] for value, shown in probe_dom.items() if str(value) in frame_probe]  # page clock
-    stamp_to_dom = [at - offset - float(text) * 1000 for text, at in stamp_seen if re.fullmatch(r"\d+\.\d+", text)]
+    frame_to_dom = [shown - frame_probe[str(value)] for value, shown in probe_dom.items() if str(value) in frame_probe]
+    stamp_to_dom = [at - float(text) * 1000 for text, at in stamp_seen if re.fullmatch(r"\d+\.\d+", text)]
     stamp_frame_to_dom = [at - frame_stamp[text] for text, at in stamp_seen if text in frame_stamp]
     # Wire: the other clients' first sight of each probe value, and the stamp's age at receipt.
     write_to_wire = [float(seen_at) * 1000 - written[int(value)] for client in reports for value, seen_at in client["probes"].items()
@@ -434,7 +431,8 @@ def report(args: argparse.Namespace, baseline: dict, loaded: dict, reports: list
           + (f"; the page {page_rate:.2f} values of each tag a second, {page_thinned} 'thinned' notices" if page_rate is not None else ""))
     print(f"  10 ms task start latency: p99 {loaded['p99']:.3f} ms, max {loaded['max']:.3f} ms, mean {loaded['mean']:.3f} ms "
           f"({loaded['cycles']} cycles, {loaded['overruns']} overruns)")
-    print(f"  runtime CPU {loaded['cpu'] * 100:.1f} % of a core (baseline {baseline['cpu'] * 100:.1f} %: the clients cost "
+    print(f"  runtime CPU {loaded['cpu'] * 100:.1f} % of a core, {loaded['system'] * 100:.1f} % of it in the kernel (baseline "
+          f"{baseline['cpu'] * 100:.1f} %, kernel {baseline['system'] * 100:.1f} %: the clients cost "
           f"{(loaded['cpu'] - baseline['cpu']) * 100:.1f} %); HMI dispatch + encode {loaded['hmi_work'] * 100:.1f} % "
           f"(encode {loaded['encode'] * 100:.1f} %: {loaded['messages']:.0f} messages/s; {loaded['dropped']} clients dropped)")
     print(f"  load average {load_average()} (2 cores shared)")
