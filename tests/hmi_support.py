@@ -69,6 +69,7 @@ VIEW_SVG = """<?xml version="1.0" encoding="UTF-8"?>
   <g id="alarm"><rect x="70" y="100" width="120" height="30" style="fill:#fde7e5"/><text x="80" y="120">HIGH</text></g>
   <g id="robot"><circle cx="0" cy="0" r="6" style="fill:#7e22ce"/></g>
   <rect id="button" x="250" y="20" width="100" height="40" style="fill:#1a7f37"/>
+  <rect id="state" x="250" y="80" width="100" height="20" style="fill:#888888"/>
 </svg>
 """
 
@@ -149,6 +150,7 @@ def plant_yaml(*, anonymous: str | None = None, description: str = SCRIPT_DESCRI
                 alarm: {{visible: "t01_iBL >= 80"}}
                 robot: {{translate: {{x: r01_xpos, y: r01_ypos, scale: [10, -10], offset: [200, 190]}}}}
                 button: {{click: {{tag: limit, write: 42}}}}
+                state: {{fill: {{expr: "_sys.state == 'RUNNING'", on_color: "#1a7f37", off_color: "#b3261e"}}}}
         """)
 
 

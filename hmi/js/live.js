@@ -12,7 +12,7 @@ export class Live extends EventTarget {
     super();
     this.url = url || `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/api/live`;
     this.values = new Map();          // name → {v, q, t, f} (f: forced)
-    this.state = 'connecting';        // connecting | live | disconnected
+    this.state = 'connecting';        // connecting | live | disconnected | stopped (on purpose)
     this.reason = '';
     this.heartbeat = 2.0;
     this.instance = null;
@@ -53,6 +53,7 @@ export class Live extends EventTarget {
     if (!this._timer) this._timer = setInterval(() => this._tick(), 500);
   }
 
+  /** Close the channel on purpose (e.g. until a login): state 'stopped', no reconnecting until connect(). */
   stop() {
     this._stopped = true;
     clearInterval(this._timer);
@@ -60,6 +61,8 @@ export class Live extends EventTarget {
     clearTimeout(this._retryTimer);
     if (this._socket) this._socket.close();
     this._socket = null;
+    this.synced = false;
+    this._setState('stopped', '');
   }
 
   /** Reconnect now (e.g. after logging in: the socket carries the identity). */

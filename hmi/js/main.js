@@ -191,6 +191,10 @@ function watchHeader() {
       connection.className = 'chip conn ok';
       setText(connection, 'live');
       offline.hidden = true;
+    } else if (now === 'stopped') {  // closed on purpose (the login page): nothing is wrong
+      connection.className = 'chip conn';
+      setText(connection, 'not connected');
+      offline.hidden = true;
     } else if (now === 'connecting') {
       connection.className = 'chip conn warn';
       setText(connection, 'connecting…');
@@ -224,6 +228,9 @@ async function start() {
   const session = await loadSession();
   renderUser();
   if (session.login_required) {
+    // The live channel, opened at once to save time, is refused before a login (401): that is
+    // no lost connection. It opens again after the login (restart → reconnect).
+    state.live.stop();
     showLoginPage();
     return;
   }

@@ -13,6 +13,7 @@ import time
 from typing import TYPE_CHECKING, TextIO
 
 from softplc.latency.plant import scenario_durations
+from softplc.util.plurals import plural
 
 if TYPE_CHECKING:
     from softplc.latency.results import Measurement
@@ -20,10 +21,6 @@ if TYPE_CHECKING:
 
 REDRAW_INTERVAL = 0.5  # s
 CLEAR_LINE = "\r\033[K"
-
-
-def plural(count: int, noun: str) -> str:
-    return f"{count} {noun}{'' if count == 1 else 's'}"
 
 
 def remaining_seconds(durations: tuple[float, float, float], remaining: int, last_task: int | None,

@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from softplc.latency.results import Measurement, Sample
-from softplc.latency.progress import plural
 from softplc.latency.statistics import DelayStatistics, share_at_most, summarize
 from softplc.util.plurals import plural
 

@@ -79,7 +79,7 @@ async def test_softplc_apply_changes_a_running_program_and_refuses_a_broken_chan
         status, out, err = await softplc("apply", *login, password=PASSWORDS["engineer"])
         assert status == 2 and out == ""
         assert err.startswith("online change refused, nothing applied: 1 problem:\n")
-        assert f"tagdb.yaml:10:" in err and re.search(rf"{re.escape(str(source.resolve()))}:\d+:\d+: SyntaxError: invalid syntax", err), err
+        assert "tagdb.yaml:10:" in err and re.search(rf"{re.escape(str(source.resolve()))}:\d+:\d+: SyntaxError: invalid syntax", err), err
         assert runtime.program("stamp").version == 2
         # an operator may not: exit 4 (the configuration as --config, the shared login option)
         status, out, err = await softplc("apply", "--endpoint", server.endpoint, "--user", "operator", "--password-stdin",

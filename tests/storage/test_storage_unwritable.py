@@ -12,7 +12,6 @@ from __future__ import annotations
 from dataclasses import astuple
 from typing import Any
 
-import dataclasses
 import logging
 from pathlib import Path
 

@@ -16,7 +16,6 @@ session's CSRF token in `X-CSRF-Token`, like a write.
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
@@ -24,8 +23,10 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from softplc.core.commands import CommandRefused, Permission, UnknownCommand
+from softplc.adapters.hmi.untrusted import BadJson, loads, shown_name
 from softplc.adapters.hmi.wire import json_response
 from softplc.util.peers import PeerLog, peer_host
+from softplc.core.roles import Role
 from softplc.util.suggest import did_you_mean
 from softplc.core.tagdb import Origin
 
@@ -79,7 +80,7 @@ class CommandDoor:
                    else None if sessions.csrf_ok(request, identity) else "missing or wrong CSRF token (X-CSRF-Token)")
             if why is not None:  # reported like a refused write (the audit trail), never reaching the command
                 commands.refused(name, arguments, Origin(SOURCE, identity.user, peer, identity.role), why)
-                self.peer_log.warning(peer, "refused commands", "HMI: command %s from %s refused: %s", name, peer, why)
+                self.peer_log.warning(peer, "refused commands", "HMI: command %s from %s refused: %s", shown_name(name), peer, why)
                 return json_response({"ok": False, "command": name, "error": why}, status=403)
         origin = Origin(SOURCE, identity.user, peer, identity.role)
         try:
@@ -102,6 +103,17 @@ class CommandDoor:
         self._note(origin, name, command, True, result if isinstance(result, str) else "")
         return json_response({"ok": True, "command": name, "result": result, "time": round(server.plant.clock.wall(), 3)})
 
+    async def refuse_request(self, request: web.Request, reason: str) -> None:
+        """Report a call refused before its handler (the Origin check) to the audit trail, as a missing CSRF token is."""
+        name = request.match_info.get("name")
+        if request.method != "POST" or not name:
+            return
+        identity = self.server.sessions.identify(request)
+        peer = peer_host(request.remote)
+        arguments, _ = await _arguments(request)
+        origin = Origin(SOURCE, identity.user, peer, identity.role) if identity is not None else Origin(SOURCE, "", peer, Role.VIEWER)
+        self.server.plant.commands.refused(name, arguments, origin, reason)
+
     def _note(self, origin: Origin, name: str, command: Any, accepted: bool, detail: str) -> None:
         if command is not None and command.permission is not Permission.VIEW:
             self.server.writelog.command(origin, name, accepted, detail)
@@ -116,9 +128,9 @@ async def _arguments(request: web.Request) -> tuple[dict[str, Any], str]:
     if not body.strip():
         return {}, ""
     try:
-        arguments = json.loads(body.decode("utf-8"))
-    except ValueError:  # UnicodeDecodeError included
-        return {}, "the body is not JSON: send the arguments as a JSON object, e.g. {\"alarm\": \"t01_input_full\"}"
+        arguments = loads(body)
+    except BadJson as error:
+        return {}, f"the body is {error}: send the arguments as a JSON object, e.g. {{\"alarm\": \"t01_input_full\"}}"
     if not isinstance(arguments, dict):
         return {}, f"the arguments are a JSON object ({{\"name\": value, ...}}), not {_JSON_TYPES.get(type(arguments), 'that')}"
     return arguments, ""

@@ -4,12 +4,15 @@ Each distinct expression is a live item named "=<expression>" (tag names never s
 When a tag changes, only the expressions that read it are evaluated again; an expression's
 quality is the worst of its tags' (a robot away makes its marker's condition BAD too), and one
 that cannot be evaluated (text compared with a number...) is BAD with no value, logged once.
+While no browser watches anything the live channel skips that work: it marks the table stale
+(`stale = True`), and the next subscription re-evaluates every expression (`refresh()`) before
+its snapshot, so a snapshot never shows a value from before the changes nobody watched.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from softplc.core.expression import Condition
@@ -45,12 +48,13 @@ class ExpressionTable:
         for key, condition in self._conditions.items():
             for name in condition.names:
                 self._readers.setdefault(name, []).append(key)
+        self._read = frozenset(db[name] for name in self._readers)  # the tags some expression reads
         self._items: dict[str, Item] = {}
         self._failed: set[str] = set()
-        stamp = now()
+        self.stale = False  # tags changed without being looked at (nobody watched): refresh() before reading
         for key in self._conditions:
             value, quality = self._evaluate(key)
-            self._items[key] = Item(key, value, quality, stamp)
+            self._items[key] = Item(key, value, quality, self._stamp(key))
 
     def __contains__(self, key: object) -> bool:
         return key in self._items
@@ -58,29 +62,36 @@ class ExpressionTable:
     def get(self, key: str) -> Item | None:
         return self._items.get(key)
 
-    def changed(self, tags: Sequence[Tag]) -> list[Item]:
+    def changed(self, tags: set[Tag]) -> list[Item]:
         """Re-evaluate the expressions that read any of `tags`; return those whose value or quality changed."""
-        readers = self._readers
-        if not readers:
+        read = self._read & tags  # C speed: a scan may change thousands of tags, expressions read a few
+        if not read:
             return []
         due: dict[str, None] = {}
-        for tag in tags:
-            keys = readers.get(tag.name)
-            if keys:
-                for key in keys:
-                    due[key] = None
-        return self._refresh(due) if due else []
+        for tag in read:
+            for key in self._readers[tag.name]:
+                due[key] = None
+        return self._refresh(due)
+
+    def refresh(self) -> list[Item]:
+        """Evaluate every expression again (after changes nobody watched); return those whose value or quality changed."""
+        self.stale = False
+        return self._refresh(self._conditions)
 
     def _refresh(self, keys: Iterable[str]) -> list[Item]:
         changed = []
-        stamp = self._now()
         for key in keys:
             item = self._items[key]
             value, quality = self._evaluate(key)
             if value != item.value or quality is not item.quality or type(value) is not type(item.value):
-                item.value, item.quality, item.timestamp = value, quality, stamp
+                item.value, item.quality, item.timestamp = value, quality, self._stamp(key)
                 changed.append(item)
         return changed
+
+    def _stamp(self, key: str) -> float:
+        """When the value last changed: the newest timestamp of the tags it reads (now, if it reads none)."""
+        db = self._db
+        return max((db[name].timestamp for name in self._conditions[key].names), default=self._now())
 
     def _evaluate(self, key: str) -> tuple[Any, Quality]:
         condition = self._conditions[key]

@@ -6,14 +6,15 @@ Protocol (JSON text messages; docs/hmi.md):
     client → {"type": "subscribe", "items": ["t01_iBL", "=t01_iBL > 90", ...]}   (replaces the set)
     server → {"type": "snapshot", "time": 1767225600.1, "values": {"t01_iBL": 42.0, ...}, "done": true}
     server → {"type": "update", "time": T, "values": {...}, "times": {...}, "quality": {...}}
-             only changed items, at most `rate` per second (fanout.py: the wire format)
+             only changed items, sent at once, each value at most `rate` times a second (fanout.py)
+    server → {"type": "thinned", "updates": N, "message": ...}   a slow client's updates were merged
     client → {"type": "alarms", "on": true}   alarm snapshot, then alarm changes (alarm_feed.py)
     both   → {"type": "ping"} every `heartbeat` seconds; each side drops a peer silent for 2.5 of them
 
 The scan is never held up: `db.on_change` only hands the list of changed tags to a dispatcher
-task, which marks the subscribed groups; each group encodes its update once, in chunks. Each
-slice of that work is one *turn* of pacing.py: one at a time, never into a scan cycle due
-within 5 ms.
+task, which notes them in the groups that watch them; each group encodes its update once, in
+chunks. Each slice of that work is one *turn* of pacing.py: one at a time, never into a scan
+cycle due within 5 ms. How late the values go out is recorded (delivery.py).
 
 Pacing (rate limit, heartbeats, slow-client drop) is in real time even under `--sim --speed N`:
 it protects the network and the browser, which live in real time. Paced on the simulated clock,
@@ -24,20 +25,23 @@ would flood them (or, idle, never send at all).
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
+import math
 import secrets
 import time
 from collections.abc import Sequence
+from itertools import chain
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSMsgType, web
 
 from softplc.core.clock import Clock
 from softplc.adapters.hmi.expressions import ExpressionTable
-from softplc.adapters.hmi.fanout import Client, Encoder, Group
+from softplc.adapters.hmi.delivery import DeliveryRecord
+from softplc.adapters.hmi.fanout import Client, Encoder, Frame, Group
 from softplc.adapters.hmi.pacing import Pacer
 from softplc.adapters.hmi.sessions import Identity
+from softplc.adapters.hmi.untrusted import BadJson, clip, loads, shown
 from softplc.util.peers import PeerLog, peer_host
 from softplc.core.tagdb import TagDatabase
 from softplc.core.tags import Tag
@@ -54,26 +58,31 @@ MAX_MESSAGE = 2 * 1024 * 1024  # bytes of one client message (a subscription of 
 SUBSCRIBE_INTERVAL = 0.1  # s: a client changing its subscription faster gets the last one it asked for
 SILENCE = 2.5  # heartbeats without a word before a peer is taken for gone
 DISPATCH_SLICE = 1000  # changed tags sorted into groups per turn (~0.3 ms)
+TRY_AGAIN_LATER = 1013  # WebSocket close code of a refused connection (RFC 6455 registry: "Try Again Later")
+MAX_CLOSE_REASON = 123  # bytes of a close frame's reason
 
 
 class Hub:
     """Every live client, grouped by what they watch; pushes changed values to them."""
 
     def __init__(self, db: TagDatabase, expressions: ExpressionTable, clock: Clock, *, rate: float, heartbeat: float,
-                 max_clients: int, drop_after: float | None = None) -> None:
+                 max_clients: int, max_clients_per_address: int | None = None, drop_after: float | None = None,
+                 pacer: Pacer | None = None) -> None:
         self.db = db
         self.expressions = expressions
         self.clock = clock
         self.rate = rate
         self.heartbeat = heartbeat
         self.max_clients = max_clients
+        self.max_clients_per_address = max_clients_per_address or max_clients
+        self._holders: dict[tuple[str, str], int] = {}  # ("address", host) or ("login", token) → live connections
         self.drop_after = drop_after if drop_after is not None else max(10.0, 5 * heartbeat)
         self.instance = secrets.token_hex(8)  # a new one per start: pages notice the runtime restarted
         self.clients: set[Client] = set()
         self.groups: dict[tuple[frozenset[str], float], Group] = {}
-        self.pacer = Pacer(clock)
-        self.encoder = Encoder(self._lookup, self.pacer)
-        self._watchers: dict[str, list[Group]] = {}
+        self.pacer = pacer or Pacer(clock)
+        self.encoder = Encoder(self.pacer)
+        self.delivery = DeliveryRecord()
         self._incoming: list[Sequence[Tag]] = []
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
@@ -107,13 +116,15 @@ class Hub:
                 group.task.cancel()
         self.clients.clear()
         self.groups.clear()
-        self._watchers.clear()
 
-    def stats(self) -> dict[str, Any]:
+    def stats(self, since: float = 0.0) -> dict[str, Any]:
+        """Figures of the live channel; `delivery`: the ages of the values sent since `since` (delivery.py)."""
         return {
             "clients": len(self.clients),
             "groups": len(self.groups),
             "frames_sent": sum(client.sent_frames for client in self.clients),
+            "thinned": sum(client.thinned for client in self.clients),
+            "delivery": self.delivery.summary(since),
             "bytes_sent": sum(client.sent_bytes for client in self.clients),
             "messages_encoded": self.encoder.messages,
             "encode_seconds": round(self.encoder.seconds, 4),
@@ -135,58 +146,57 @@ class Hub:
             self._wake.clear()
             batches, self._incoming = self._incoming, []
             if not self.groups:  # no browser watches anything: no turns to take
+                self.expressions.stale = True  # ... but the expressions missed these changes
                 continue
-            due: dict[Group, None] = {}
-            for tags in batches:
-                for start in range(0, len(tags), DISPATCH_SLICE):
-                    async with self.pacer.turn():
-                        self._sort(tags[start:start + DISPATCH_SLICE], due)
+            # The batches of several scans (each commits its own) share a turn: fewer, fuller turns.
+            changed = batches[0] if len(batches) == 1 else list(chain.from_iterable(batches))
+            for start in range(0, len(changed), DISPATCH_SLICE):
                 async with self.pacer.turn():
-                    begun = time.thread_time()
-                    for item in self.expressions.changed(tags):
-                        for group in self._watchers.get(item.name, ()):
-                            group.mark(item.name)
-                            due[group] = None
-                    self.dispatch_seconds += time.thread_time() - begun
-            for group in due:
+                    self._sort(changed[start:start + DISPATCH_SLICE])
+
+    def _sort(self, tags: Sequence[Tag]) -> None:
+        """Note the changed tags (and the expressions that read them) in the groups that watch them.
+
+        Set intersections of the objects themselves: C speed, not a Python loop per tag; the
+        per-value rate limit (`Group.note`) then loops over what each group watches only.
+        """
+        begun = time.thread_time()
+        changed: set[Any] = set(tags)
+        changed.update(self.expressions.changed(changed))
+        now = time.monotonic()
+        for group in self.groups.values():
+            watched = changed & group.members
+            if watched:
+                group.note(watched, now)
                 if group.task is None and group.clients:
                     group.task = asyncio.create_task(group.run(self.pacer), name="hmi-group")
-
-    def _sort(self, tags: Sequence[Tag], due: dict[Group, None]) -> None:
-        """Mark the changed tags in the groups that watch them (set intersections: C speed, not a loop per tag)."""
-        if not self.groups:
-            return
-        begun = time.thread_time()
-        changed = {tag.name for tag in tags}
-        for group in self.groups.values():
-            watched = changed & group.members_of
-            if watched:
-                group.mark_all(watched)
-                due[group] = None
         self.dispatch_seconds += time.thread_time() - begun
 
-    def _lookup(self, name: str) -> Any:
+    def _sent(self, frame: Frame) -> None:
+        """A client's frame went out: how old was its oldest value (the server's part of the latency)."""
+        if frame.oldest != math.inf and not self.clock.simulated:
+            self.delivery.add(self.clock.wall() - frame.oldest)
+
+    def _item(self, name: str) -> Any:
         tag = self.db.get(name)
         return tag if tag is not None else self.expressions.get(name)
-
-    def known(self, name: str) -> bool:
-        return name in self.db or name in self.expressions
 
     # -- clients --------------------------------------------------------------------------------
 
     def subscribe(self, client: Client, names: list[str]) -> list[str]:
         """Move the client to the group of `names` (known ones); returns the unknown ones."""
-        known = [name for name in names if self.known(name)]
-        unknown = [name for name in names if not self.known(name)]
-        key = (frozenset(known), self.rate)
+        if self.expressions.stale:
+            self.expressions.refresh()  # tags changed while nobody watched: the snapshot must be current
+        found = {name: self._item(name) for name in names}
+        unknown = [name for name, item in found.items() if item is None]
+        key = (frozenset(name for name, item in found.items() if item is not None), self.rate)
         self._leave(client)
         group = self.groups.get(key)
         if group is None:
-            group = self.groups[key] = Group(key, self.encoder)
-            for name in key[0]:
-                self._watchers.setdefault(name, []).append(group)
+            group = self.groups[key] = Group(key, (item for item in found.values() if item is not None), self.encoder)
         group.clients.add(client)
         client.group = group
+        client.late_told = group.late  # told of its new group's lateness from now on
         client.resynchronise()
         return unknown
 
@@ -198,12 +208,6 @@ class Hub:
         group.clients.discard(client)
         if not group.clients:
             del self.groups[group.key]
-            for name in group.key[0]:
-                watching = self._watchers.get(name)
-                if watching is not None:
-                    watching.remove(group)
-                    if not watching:
-                        del self._watchers[name]
             if group.task is not None:
                 group.task.cancel()
 
@@ -224,6 +228,21 @@ class Hub:
                     self._drop(client, f"more than {self.drop_after:.0f} s behind (too slow to read its updates)")
                 elif ping:
                     client.control({"type": "ping"})
+                self._tell_thinned(client)
+
+    @staticmethod
+    def _tell_thinned(client: Client) -> None:
+        """Tell a client, at most once a tick, that it got fewer updates than the rate: never thinned silently."""
+        late = client.group.late if client.group is not None else 0
+        merged, behind = client.thinned - client.thinned_told, late - client.late_told
+        if merged <= 0 and behind <= 0:
+            client.late_told = late  # a new group's count
+            return
+        client.thinned_told, client.late_told = client.thinned, late
+        why = (f"this connection could not take every update: {merged} were merged into later ones" if merged > 0 else
+               f"the runtime could not send every change in time: {behind} updates were late and merged")
+        client.control({"type": "thinned", "updates": merged, "late": max(behind, 0),
+                        "message": f"{why} (each value shown is still the latest)"})
 
     def _drop(self, client: Client, why: str) -> None:
         self.dropped += 1
@@ -233,17 +252,42 @@ class Hub:
     # -- the WebSocket endpoint -----------------------------------------------------------------
 
     async def handle(self, request: web.Request, identity: Identity, origins: OriginPolicy, sessions: Sessions) -> web.StreamResponse:
-        """GET /api/live: checks done by the caller (identity); here the Origin and the client limit."""
+        """GET /api/live: checks done by the caller (identity); here the Origin and the connection limits."""
         origin = request.headers.get("Origin")
+        peer = peer_host(request.remote)
         if origin is not None and not origins.allowed(origin, request):
-            self.peer_log.warning(peer_host(request.remote), "refused live origins", "HMI: live connection from %s refused: origin %s",
-                                  request.remote, origin, detail=origin)
+            self.peer_log.warning(peer, "refused live origins", "HMI: live connection from %s refused: origin %s",
+                                  request.remote, clip(origin, 100), detail=clip(origin, 100))
             raise web.HTTPForbidden(text="cross-origin WebSocket refused")
+        # A visitor without a login counts by address, a login by itself: an anonymous flood from
+        # this computer cannot lock out an operator who logs in.
+        holder = ("login", identity.session.token) if identity.session is not None else ("address", peer)
+        refusal = None
         if len(self.clients) >= self.max_clients:
-            raise web.HTTPServiceUnavailable(text=f"at most {self.max_clients} live connections")
+            plural = "s" if self.max_clients != 1 else ""
+            refusal = f"the runtime serves at most {self.max_clients} live connection{plural} at once; try again later"
+        elif self._holders.get(holder, 0) >= self.max_clients_per_address:
+            refusal = (f"too many live connections from {clip(peer, 45)} (at most {self.max_clients_per_address} "
+                       f"{'per login' if identity.session is not None else 'per address without a login'}): close other tabs")
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, compress=False, autoping=True)
         await ws.prepare(request)
-        client = Client(ws, request.transport, identity, str(request.remote), self.encoder, self.pacer)
+        if refusal is not None:
+            # Accepted only to be closed with the reason: a browser never sees the body of a refused
+            # handshake (it reports 1006, "connection lost"), but it does see a close frame's reason.
+            self.peer_log.warning(peer, "refused live connections", "HMI: live connection from %s refused: %s", peer, refusal)
+            reason = refusal.encode()[:MAX_CLOSE_REASON].decode("utf-8", "ignore").encode()  # whole characters only
+            await ws.close(code=TRY_AGAIN_LATER, message=reason)
+            return ws
+        self._holders[holder] = self._holders.get(holder, 0) + 1
+        try:
+            return await self._serve(request, ws, identity)
+        finally:
+            left = self._holders.pop(holder) - 1
+            if left:
+                self._holders[holder] = left
+
+    async def _serve(self, request: web.Request, ws: web.WebSocketResponse, identity: Identity) -> web.WebSocketResponse:
+        client = Client(ws, request.transport, identity, str(request.remote), self.encoder, self.pacer, self._sent)
         self.clients.add(client)
         client.start()
         client.control({"type": "hello", "instance": self.instance, "heartbeat": self.heartbeat, "rate": self.rate,
@@ -278,9 +322,9 @@ class _Subscriber:
 
     def handle(self, text: str) -> None:
         try:
-            message = json.loads(text)
-        except ValueError:
-            self.client.control({"type": "error", "message": "not JSON"})
+            message = loads(text)
+        except BadJson as error:
+            self.client.control({"type": "error", "message": f"the message is {error}"})
             return
         kind = message.get("type") if isinstance(message, dict) else None
         if kind == "ping":
@@ -297,7 +341,7 @@ class _Subscriber:
         elif kind == "alarms":
             self._alarms(message.get("on", True))
         elif kind != "pong":
-            self.client.control({"type": "error", "message": f"unknown message type {kind!r}"})
+            self.client.control({"type": "error", "message": f"unknown message type {shown(kind)!r}"})
 
     def _alarms(self, on: Any) -> None:
         feed = self.hub.alarm_feed
@@ -322,7 +366,7 @@ class _Subscriber:
         self._last = time.monotonic()
         unknown = self.hub.subscribe(self.client, wanted)
         if unknown:
-            self.client.control({"type": "unknown", "items": unknown[:100], "count": len(unknown)})
+            self.client.control({"type": "unknown", "items": [clip(name) for name in unknown[:100]], "count": len(unknown)})
 
     def cancel(self) -> None:
         if self._joining is not None:

@@ -19,6 +19,8 @@ from urllib.parse import urlsplit
 
 from aiohttp import web
 
+from softplc.adapters.hmi.untrusted import clip
+
 CONTENT_SECURITY_POLICY = (
     "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; connect-src 'self'; "
     "font-src 'self'; object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors 'none'"
@@ -60,20 +62,30 @@ class OriginPolicy:
         return origin == f"{request.scheme}://{request.host}".lower() or origin in self.allowed_origins
 
 
-def middleware(policy: OriginPolicy) -> Callable[..., Awaitable[web.StreamResponse]]:
-    """Host and Origin checks before the handler; safety headers on every response."""
+def middleware(policy: OriginPolicy, on_refused: Callable[[web.Request, str], Awaitable[None]] | None = None
+               ) -> Callable[..., Awaitable[web.StreamResponse]]:
+    """Host and Origin checks before the handler; safety headers on every response.
+
+    `on_refused(request, reason)` is told of every state-changing request refused by the Origin
+    check (the server reports it to the audit trail and logs it), as a missing CSRF token is.
+    """
 
     @web.middleware
     async def guard(request: web.Request, handler: Callable[[web.Request], Awaitable[web.StreamResponse]]) -> web.StreamResponse:
         try:
             if not policy.host_ok(request):
-                raise web.HTTPMisdirectedRequest(text=f"unknown host name {request.host!r}: add it to servers.hmi.allowed_origins")
+                raise web.HTTPMisdirectedRequest(text=f"unknown host name {clip(request.host, 100)!r}: add it to servers.hmi.allowed_origins")
             if request.method in UNSAFE_METHODS:
                 origin = request.headers.get("Origin")
+                reason = None
                 if origin is not None and not policy.allowed(origin, request):
-                    raise web.HTTPForbidden(text=f"cross-origin request from {origin} refused")
-                if origin is None and request.headers.get("Sec-Fetch-Site") == "cross-site":
-                    raise web.HTTPForbidden(text="cross-site request refused")
+                    reason = f"cross-origin request from {clip(origin, 100)} refused"
+                elif origin is None and request.headers.get("Sec-Fetch-Site") == "cross-site":
+                    reason = "cross-site request refused"
+                if reason is not None:
+                    if on_refused is not None:
+                        await on_refused(request, reason)
+                    raise web.HTTPForbidden(text=reason)
             response = await handler(request)
         except web.HTTPException as error:
             if request.path.startswith("/api/") and error.status >= 400:

@@ -30,15 +30,18 @@ from softplc.adapters.hmi.live import Hub
 from softplc.adapters.hmi.metrics_route import MetricsRoute
 from softplc.adapters.hmi.metrics_settings import MetricsSettings
 from softplc.adapters.hmi.operations import install_operations
+from softplc.adapters.hmi.pacing import pacer_for
 from softplc.adapters.hmi.plant import PlantModel
 from softplc.adapters.hmi.security import OriginPolicy, middleware
 from softplc.adapters.hmi.sessions import Sessions
 from softplc.adapters.hmi.settings import HmiSettings, settings_problems
 from softplc.adapters.hmi.shell import Shell, builtin_pages
 from softplc.adapters.hmi.supervisory import add_supervisory
+from softplc.adapters.hmi.untrusted import clip
 from softplc.adapters.hmi.views import View, load_views
 from softplc.adapters.hmi.writelog import WriteLog
 from softplc.security.logins import PasswordLogins
+from softplc.util.peers import PeerLog, peer_host
 from softplc.util.plurals import plural
 from softplc.security.users import UserStore
 from softplc.config.yamlsource import ConfigError
@@ -99,7 +102,8 @@ class HmiServer:
         conditions = {key: condition for view in self.views.values() for key, condition in view.expressions.items()}
         self.expressions = ExpressionTable(db, conditions, plant.clock.wall)
         self.hub = Hub(db, self.expressions, plant.clock, rate=settings.max_update_rate, heartbeat=settings.heartbeat,
-                       max_clients=settings.max_clients)
+                       max_clients=settings.max_clients, max_clients_per_address=settings.max_clients_per_address,
+                       pacer=pacer_for(plant))
         self.origins = OriginPolicy(settings.allowed_origins, extra_hosts=(settings.host.lower(),))
         self.shell.pages[:0] = builtin_pages(self.overview.has_fleet, [(view.name, view.title) for view in self.views.values()])
         add_supervisory(self.shell, plant.commands, self.assets)  # alarms, journal, trends: when the runtime has them
@@ -165,15 +169,29 @@ class HmiServer:
 
     def _application(self) -> web.Application:
         assert self.assets is not None
-        app = web.Application(middlewares=[middleware(self.origins)], client_max_size=MAX_REQUEST_BYTES)
+        api, door = Api(self), CommandDoor(self)
+        peer_log = PeerLog(log, service="HMI")
+
+        async def refused(request: web.Request, reason: str) -> None:
+            # As for a missing CSRF token: logged (rate-limited per address) and, for a write or a
+            # command, reported to the audit trail with what it asked for.
+            peer = peer_host(request.remote)
+            peer_log.warning(peer, "cross-origin requests refused", "HMI: %s %s from %s refused: %s", request.method,
+                             clip(request.path, 100), peer, reason, detail=reason)
+            if request.path == "/api/write":
+                await api.refuse_request(request, reason)
+            elif request.path.startswith("/api/commands/"):
+                await door.refuse_request(request, reason)
+
+        app = web.Application(middlewares=[middleware(self.origins, refused)], client_max_size=MAX_REQUEST_BYTES)
         index = self.assets / "index.html"
 
         async def page(request: web.Request) -> web.FileResponse:
             return web.FileResponse(index)
 
         app.add_routes([web.get("/", page), web.get("/index.html", page)])
-        app.add_routes(Api(self).routes())
-        app.add_routes(CommandDoor(self).routes())
+        app.add_routes(api.routes())
+        app.add_routes(door.routes())
         app.add_routes(JournalExport(self).routes())
         app.add_routes(self.shell.routes)
         app.add_routes(self.metrics_route.routes())

@@ -24,10 +24,11 @@ if TYPE_CHECKING:
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
-DEFAULT_UPDATE_RATE = 10.0  # updates per second and client (FUXA polls every 1-3 s; a screen refreshes at 60)
+DEFAULT_UPDATE_RATE = 10.0  # updates of each value per second and client (FUXA polls every 1-3 s; a screen refreshes at 60)
 DEFAULT_HEARTBEAT = 2.0  # s between heartbeats each way; a silent peer is gone after 2.5 of them
 DEFAULT_SESSION_TIMEOUT = 8 * 3600.0  # idle seconds before a login expires (one shift)
 DEFAULT_MAX_CLIENTS = 100  # live connections at once; more are refused (each costs memory and a send per update)
+DEFAULT_MAX_CLIENTS_PER_ADDRESS = 20  # live connections of one address without a login (or of one login): a visitor's tabs
 
 _DURATION: dict[str, Any] = {"type": ["string", "number"], "description": "A duration: 10ms, 1s, 2min, or a number of seconds."}
 
@@ -50,10 +51,12 @@ HMI_SERVER: dict[str, Any] = {
             "required": ["certificate", "private_key"],
             "additionalProperties": False,
         },
-        "max_update_rate": {"type": "number", "minimum": 0.2, "maximum": 100, "description": "Most live updates per second sent to one browser (default 10)."},
+        "max_update_rate": {"type": "number", "minimum": 0.2, "maximum": 100, "description": "Most live updates of each value per second sent to one browser (default 10)."},
         "heartbeat": {**_DURATION, "description": "Interval of the live channel's heartbeats (default 2s); a silent peer is dropped after 2.5 intervals."},
         "session_timeout": {**_DURATION, "description": "A login expires after this long without a request (default 8h)."},
         "max_clients": {"type": "integer", "minimum": 1, "maximum": 10000, "description": "Most live connections at once (default 100)."},
+        "max_clients_per_address": {"type": "integer", "minimum": 1, "maximum": 10000,
+                                    "description": "Most live connections of one address without a login, and of one login (default 20)."},
         "allowed_origins": {
             "type": "array",
             "items": {"type": "string"},
@@ -179,6 +182,7 @@ class HmiSettings:
     heartbeat: float = DEFAULT_HEARTBEAT
     session_timeout: float = DEFAULT_SESSION_TIMEOUT
     max_clients: int = DEFAULT_MAX_CLIENTS
+    max_clients_per_address: int = DEFAULT_MAX_CLIENTS_PER_ADDRESS
     allowed_origins: tuple[str, ...] = ()
     open_browser: bool = False  # --hmi-open: open the overview in a browser once serving
 
@@ -209,6 +213,7 @@ class HmiSettings:
             heartbeat=_seconds(section.get("heartbeat"), DEFAULT_HEARTBEAT),
             session_timeout=_seconds(section.get("session_timeout"), DEFAULT_SESSION_TIMEOUT),
             max_clients=int(section.get("max_clients", DEFAULT_MAX_CLIENTS)),
+            max_clients_per_address=int(section.get("max_clients_per_address", DEFAULT_MAX_CLIENTS_PER_ADDRESS)),
             allowed_origins=tuple(str(origin).rstrip("/") for origin in section.get("allowed_origins", ())),
         )
 

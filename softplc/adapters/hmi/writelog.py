@@ -12,12 +12,22 @@ import asyncio
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
+from softplc.adapters.hmi.untrusted import clip, shown
 from softplc.core.tagdb import Origin, WriteEvent
 
 log = logging.getLogger("softplc.adapters.hmi")
 
 SOURCE = "hmi"
+NAME_SHOWN = 200  # characters of a tag or command name in a line (the HMI's own refusals come clipped to 100 already)
+
+
+def _repr(value: Any) -> str:
+    """A value as the log shows it: repr, at most a few hundred characters."""
+    if isinstance(value, str):
+        return repr(clip(value))
+    return repr(value) if isinstance(value, (bool, int, float)) or value is None else repr(shown(value))
 
 
 @dataclass
@@ -49,13 +59,13 @@ class WriteLog:
             budget.suppressed += 1
             budget.refused += not accepted
             if len(budget.tags) < 5:
-                budget.tags[f"command {name}"] = None
+                budget.tags[f"command {clip(name, NAME_SHOWN)}"] = None
             return
         role = origin.role.value if origin.role is not None else "runtime"
         if accepted:
-            log.info("HMI command by %s (%s): %s%s", origin, role, name, f": {detail}" if detail else "")
+            log.info("HMI command by %s (%s): %s%s", origin, role, name, f": {clip(detail)}" if detail else "")
         else:
-            log.warning("HMI command by %s (%s) refused: %s: %s", origin, role, name, detail)
+            log.warning("HMI command by %s (%s) refused: %s: %s", origin, role, clip(name, NAME_SHOWN), clip(detail))
 
     def _budget(self, who: str) -> _Budget | None:
         """This interval's budget of `who` (None without an event loop: log every line)."""
@@ -77,14 +87,15 @@ class WriteLog:
             budget.suppressed += 1
             budget.refused += not event.accepted
             if len(budget.tags) < 5:
-                budget.tags[event.tag] = None
+                budget.tags[clip(event.tag, NAME_SHOWN)] = None
             return
         role = event.origin.role.value if event.origin.role is not None else "runtime"
+        # A line holds at most a few hundred characters of what the client sent (a value may be 1 MB of text).
         if event.accepted:
-            log.info("HMI write by %s (%s): %s = %r (was %r)", who, role, event.tag, event.new, event.old)
+            log.info("HMI write by %s (%s): %s = %s (was %s)", who, role, event.tag, _repr(event.new), _repr(event.old))
         else:
-            log.warning("HMI write by %s (%s) refused: %s = %r: %s: %s", who, role, event.tag, event.new,
-                        event.rule.value if event.rule else "refused", event.detail)
+            log.warning("HMI write by %s (%s) refused: %s = %s: %s: %s", who, role, clip(event.tag, NAME_SHOWN), _repr(event.new),
+                        event.rule.value if event.rule else "refused", clip(event.detail))
 
     def _summarise(self, who: str) -> None:
         budget = self._budgets.pop(who, None)

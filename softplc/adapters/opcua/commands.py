@@ -134,7 +134,7 @@ class CommandsDoor:
         name, text = checked
         try:
             parsed = json.loads(text) if text.strip() else {}
-        except ValueError:
+        except (ValueError, RecursionError):  # not JSON, or nested deeper than the parser goes
             return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
         if not isinstance(parsed, dict):
             return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)

@@ -18,6 +18,8 @@ from softplc.core.tagdb import WriteEvent
 from softplc.util.timestamps import format_utc
 
 MAX_TEXT = 4096  # longest value, argument list or detail kept (a client may send megabytes)
+MAX_REFUSED = 512  # of a refused entry (what anyone, a viewer included, can send by the thousand): its value, arguments, detail
+MAX_NAME = 256  # longest tag or command name kept (a refused one may be anything a client typed)
 _string = json.encoder.encode_basestring  # a str as JSON text, in C (as json.dumps(..., ensure_ascii=False))
 WRITE, COMMAND = "write", "command"
 
@@ -71,16 +73,19 @@ def row_of(item: WriteEvent | CallRecord, plant: str, sequence: int) -> tuple[An
     if type(item) is WriteEvent:
         origin = item.origin
         role = origin.role.value if origin.role is not None else ""
-        rule = item.rule.value if item.rule is not None else ""
-        return (item.time, plant, WRITE, origin.source, origin.user, origin.peer, role, item.tag, item.tag, None,
-                encode(item.old), encode(item.new), 1 if item.rule is None else 0, rule, _clip(item.detail), sequence)
+        if item.rule is None:
+            return (item.time, plant, WRITE, origin.source, origin.user, origin.peer, role, item.tag, item.tag, None,
+                    encode(item.old), encode(item.new), 1, "", _clip(item.detail), sequence)
+        name = _clip(item.tag, MAX_NAME)
+        return (item.time, plant, WRITE, origin.source, origin.user, origin.peer, role, name, name, None,
+                encode(item.old), encode(item.new, MAX_REFUSED), 0, item.rule.value, _clip(item.detail, MAX_REFUSED), sequence)
     call = item.call
     origin = call.origin
     role = origin.role.value if origin.role is not None else ""
-    arguments = call.arguments
-    return (call.time, plant, COMMAND, origin.source, origin.user, origin.peer, role, call.command, item.tag,
-            encode(dict(arguments)), encode(item.old) if item.tag else None, encode(item.new) if item.tag else None,
-            1 if call.accepted else 0, item.rule, _clip(str(call.detail)), sequence)
+    limit = MAX_TEXT if call.accepted else MAX_REFUSED
+    return (call.time, plant, COMMAND, origin.source, origin.user, origin.peer, role, _clip(call.command, MAX_NAME), item.tag,
+            encode(dict(call.arguments), limit), encode(item.old) if item.tag else None, encode(item.new, limit) if item.tag else None,
+            1 if call.accepted else 0, item.rule, _clip(str(call.detail), limit), sequence)
 
 
 def entry_of(row: tuple[Any, ...]) -> AuditEntry:
@@ -90,8 +95,8 @@ def entry_of(row: tuple[Any, ...]) -> AuditEntry:
                       bool(accepted), rule, detail)
 
 
-def encode(value: Any) -> str | None:
-    """A value as JSON text (None stays NULL); anything a client sent is kept as text, clipped."""
+def encode(value: Any, limit: int = MAX_TEXT) -> str | None:
+    """A value as JSON text (None stays NULL); anything a client sent is kept as text, clipped to `limit` characters."""
     # Tag values first, without json.dumps (a third of a row's cost at 10,000 entries a second).
     kind = type(value)
     if kind is int:
@@ -102,7 +107,7 @@ def encode(value: Any) -> str | None:
     elif kind is bool:
         return "true" if value else "false"
     elif kind is str:
-        if len(value) <= MAX_TEXT:
+        if len(value) <= limit:
             return _string(value)
     elif value is None:
         return None
@@ -110,8 +115,10 @@ def encode(value: Any) -> str | None:
         text = json.dumps(value, ensure_ascii=False, default=str, allow_nan=True)
     except (TypeError, ValueError):  # a circular structure: cannot come from a protocol, but never fail a row
         text = json.dumps(repr(value))
-    if len(text) > MAX_TEXT:
-        text = json.dumps(f"{text[:MAX_TEXT]}… ({len(text)} characters)", ensure_ascii=False)
+    except RecursionError:  # nested deeper than the writer's stack: never fail a row either
+        text = json.dumps(f"(a {type(value).__name__} nested too deeply to be written)")
+    if len(text) > limit:
+        text = json.dumps(f"{text[:limit]}… ({len(text)} characters)", ensure_ascii=False)
     return text
 
 
@@ -124,8 +131,8 @@ def decode(text: str | None) -> Any:
         return text
 
 
-def _clip(text: str) -> str:
-    return text if len(text) <= MAX_TEXT else f"{text[:MAX_TEXT]}… ({len(text)} characters)"
+def _clip(text: str, limit: int = MAX_TEXT) -> str:
+    return text if len(text) <= limit else f"{text[:limit]}… ({len(text)} characters)"
 
 
 def format_value(value: Any) -> str:

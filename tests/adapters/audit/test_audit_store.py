@@ -6,7 +6,7 @@ import csv
 import io
 from typing import Any
 
-from softplc.storage.audit.entry import MAX_TEXT, CallRecord
+from softplc.storage.audit.entry import MAX_REFUSED, CallRecord
 from softplc.storage.audit.queries import AuditQuery, search, write_csv
 from softplc.storage.audit.store import CATALOGUE, AuditSink
 from softplc.core.commands import CommandCall
@@ -122,8 +122,8 @@ def test_a_huge_value_is_clipped_and_an_odd_one_kept_as_text(storage_settings) -
         huge, odd, nan = reversed(search(database, AuditQuery(), "plant-a"))
     finally:
         writer.stop()
-    assert huge.new.startswith('"xxxx') and huge.new.endswith("… (100002 characters)") and len(huge.new) < MAX_TEXT + 40
-    assert huge.detail.endswith("… (10000 characters)")
+    assert huge.new.startswith('"xxxx') and huge.new.endswith("… (100002 characters)") and len(huge.new) < MAX_REFUSED + 40
+    assert huge.detail.endswith("… (10000 characters)") and len(huge.detail) < MAX_REFUSED + 40  # a refused entry: clipped shorter
     assert odd.new == "b'\\x00\\xff'"
     assert nan.new != nan.new  # NaN stays NaN
 

@@ -131,18 +131,18 @@ def test_problems_in_the_history_section_are_located(make_config) -> None:
     from softplc.config.yamlsource import ConfigError
 
     with pytest.raises(ConfigError) as raised:  # softplc check and run: the section's owner reports them
-        make_config(textwrap.dedent(f"""\
+        make_config(textwrap.dedent("""\
         version: 1
         tags:
-          level: {{type: float64}}
-          count: {{type: int32, min: 0, max: 10}}
+          level: {type: float64}
+          count: {type: int32, min: 0, max: 10}
         history:
           backend: postgresql
           retention: 30 days
           partition: 90min
           record:
-            - {{tags: ["lev*", "r*_xpos"], deadband: 1%}}
-            - {{tags: count, deadband: -3, compression: {{deviation: 1, max_interval: soon}}}}
+            - {tags: ["lev*", "r*_xpos"], deadband: 1%}
+            - {tags: count, deadband: -3, compression: {deviation: 1, max_interval: soon}}
         """))
     messages = [f"{p.location.line}:{p.location.column}: {p.message}" for p in raised.value.problems]
     assert sorted(messages) == sorted([

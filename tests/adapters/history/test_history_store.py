@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from softplc.adapters.history.aggregates import Aggregate, Sample
+from softplc.adapters.history.aggregates import Sample
 from softplc.adapters.history.columns import QUALITY_CODES
 from softplc.adapters.history.queries import Continuation, HistoryReader, UnknownTag
 from softplc.adapters.history.store import HistorySink, TagInfo

@@ -7,7 +7,6 @@ rate limit and security headers.
 
 from __future__ import annotations
 
-import asyncio
 import json
 import time
 from collections.abc import AsyncIterator
@@ -103,8 +102,8 @@ async def test_roles_decide_what_may_be_written_with_the_cores_rules_and_message
         result = body["results"][0]
         if rule is None:
             assert status == 200 and result["ok"], (user, tag, body)
-        else:
-            assert status == 422 and result["rule"] == rule, (user, tag, body)
+        else:  # a role that may write nothing is refused the whole request (403), before any tag is looked at
+            assert status == (403 if user == "viewer" else 422) and result["rule"] == rule, (user, tag, body)
     # The messages are the tag database's own (the same as OPC UA and Modbus give).
     async with http_client() as session:
         csrf = await http_login(session, plant.url, "operator")
@@ -189,14 +188,15 @@ async def test_a_subscription_gets_a_snapshot_then_only_changes_at_most_rate_per
         assert snapshot["values"]["limit"] == plant.db.value("limit") and "quality" not in snapshot  # all good
         tag = plant.db["limit"]
         assert snapshot.get("times", {}).get("limit", snapshot["time"]) == round(tag.timestamp, 3)
-        # `counter` changes every 10 ms (100/s); the client gets at most 10 updates a second.
-        updates, started = 0, time.monotonic()
+        # `counter` changes every 10 ms (100/s); the client gets its value at most 10 times a second
+        # (on average: a burst of two, then one per period).
+        counters, started = 0, time.monotonic()
         while time.monotonic() - started < 2.0:
             message = json.loads((await ws.receive(timeout=2)).data)
             if message["type"] == "update":
-                updates += 1
+                counters += "counter" in message["values"]
                 assert set(message["values"]) <= {"counter", "limit", "=t01_iBM + t02_iBM"}
-        assert 10 <= updates <= 22, updates
+        assert 10 <= counters <= 2 * 10 + 3, counters
 
 
 async def test_expressions_of_views_are_evaluated_on_the_server(plant: Plant) -> None:

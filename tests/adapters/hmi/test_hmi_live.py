@@ -17,8 +17,9 @@ from pathlib import Path
 import aiohttp
 import pytest
 
-from hmi_support import plant_yaml, start_plant, wait_until
+from hmi_support import plant_yaml, receive_until, start_plant, wait_until
 from softplc.core.clock import SimClock
+from softplc.adapters.hmi.fanout import MAX_QUEUED
 
 pytestmark = pytest.mark.asyncio
 
@@ -70,7 +71,8 @@ async def test_a_client_that_stops_reading_is_not_buffered_for_and_is_dropped(tm
             # The slow client falls behind: the server keeps one set of names for it, not a queue of messages.
             await wait_until(lambda: slow_client.behind_since is not None, timeout=10, message="the slow client behind")
             await asyncio.sleep(2.0)  # 20 updates' worth of changes while it reads nothing
-            assert len(slow_client._pending) <= BLOBS and len(slow_client._queue) <= 2, (len(slow_client._pending), len(slow_client._queue))
+            assert len(slow_client._pending) <= BLOBS and slow_client.queued_bytes <= MAX_QUEUED, (len(slow_client._pending), slow_client.queued_bytes)
+            assert slow_client.thinned > 0  # and it is told so (a "thinned" message, once it reads again)
             # Meanwhile the other client keeps getting its updates on time.
             updates, started = 0, time.monotonic()
             while time.monotonic() - started < 1.0:
@@ -87,19 +89,42 @@ async def test_a_client_that_stops_reading_is_not_buffered_for_and_is_dropped(tm
 
 
 async def test_pacing_is_real_time_under_a_fast_simulated_clock(tmp_path: Path) -> None:
-    """--sim --speed 50: the plant runs 50 times faster, the browser still gets at most 10 updates a second."""
+    """--sim --speed 50: the plant runs 50 times faster, the browser still gets each value at most 10 times a second."""
     plant = await start_plant(tmp_path, clock=SimClock(speed=50))
     try:
         async with aiohttp.ClientSession() as session, session.ws_connect(plant.url + "api/live") as ws:
             await ws.send_json({"type": "subscribe", "items": ["counter", "_sys.time"]})
-            updates, values, started = 0, [], time.monotonic()
+            await receive_until(ws, "snapshot")
+            updates, counts, times, started = 0, [], 0, time.monotonic()
             while time.monotonic() - started < 2.0:
                 message = json.loads((await ws.receive(timeout=2)).data)
-                if message["type"] in ("update", "snapshot"):
-                    updates += message["type"] == "update"
-                    values.append(message["values"].get("counter"))
-            counts = [value for value in values if value is not None]
+                if message["type"] == "update":
+                    updates += 1
+                    counts += [message["values"]["counter"]] if "counter" in message["values"] else []
+                    times += "_sys.time" in message["values"]
         assert counts[-1] - counts[0] > 2000  # 2 s at 50x: 100 simulated seconds of a 10 ms task
-        assert 10 <= updates <= 22, updates
+        assert 10 <= len(counts) <= 23 and 10 <= times <= 23, (len(counts), times)  # each value ≤ 10 times a second (a burst of two)
+        assert updates <= 2 * 22  # and the messages no more than the values they carry
+    finally:
+        await plant.stop()
+
+
+async def test_a_group_that_falls_behind_tells_its_clients_they_are_thinned(tmp_path: Path) -> None:
+    """The runtime cannot send every change in time (here: its loop blocked for 0.3 s): the client is told, not silently thinned."""
+    plant = await start_plant(tmp_path, heartbeat=0.5)
+    try:
+        async with aiohttp.ClientSession() as session, session.ws_connect(plant.url + "api/live") as ws:
+            await ws.send_json({"type": "subscribe", "items": ["counter"]})
+            await receive_until(ws, "snapshot")
+            await receive_until(ws, "update")
+            group = next(iter(plant.hmi.hub.groups.values()))
+            late = group.late
+            # A change free to go, then the loop held past a whole period: that update goes out late.
+            while group.late == late:
+                plant.drive(limit=float(group.late + time.monotonic() % 50))
+                await asyncio.sleep(0.05)
+                time.sleep(0.3)  # on purpose, blocking: the runtime busy elsewhere
+            thinned = await receive_until(ws, "thinned", timeout=5)
+            assert thinned["late"] >= 1 and "could not send every change in time" in thinned["message"]
     finally:
         await plant.stop()

@@ -9,7 +9,6 @@ into tests/artifacts/hmi/ for people to look at; a failed test leaves a screensh
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import shutil
 from collections.abc import AsyncIterator
@@ -174,9 +173,9 @@ async def test_a_shelved_alarm_with_a_reason_expires_by_itself(browser: Any, pla
         await page.fill("#shelve-reason", "sensor maintenance")
         await page.select_option("#shelve-duration", "custom")
         await page.fill("#shelve-custom", "30s")
+        shelved_at = plant.runtime.clock.now()  # before the click: the shelve happens after it (read after, it raced the expiry)
         await dialog.locator("button[type=submit]").click()
         await dialog.locator(".done").wait_for()
-        shelved_at = plant.runtime.clock.now()
         # Not annunciated while shelved; the banner counts it; the shelved view says by whom, why and until when.
         await page.wait_for_selector("tr[data-alarm='t02_input_full']", state="detached")
         await page.wait_for_function("() => document.querySelector(\"#alarm-banner [data-count='shelved'] b\")?.textContent === '1'")

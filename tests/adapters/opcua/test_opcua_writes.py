@@ -8,7 +8,6 @@ import textwrap
 from contextlib import asynccontextmanager
 from pathlib import Path
 
-import pytest
 from asyncua import ua
 from pymodbus.client import AsyncModbusTcpClient
 

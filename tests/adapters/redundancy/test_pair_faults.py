@@ -16,7 +16,6 @@ import json
 import shutil
 import signal
 import time
-from pathlib import Path
 from typing import Any
 
 import pytest

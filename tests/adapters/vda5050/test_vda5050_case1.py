@@ -5,7 +5,6 @@ hands its task back while the others go on delivering."""
 from __future__ import annotations
 
 import os
-import textwrap
 from pathlib import Path
 
 import pytest
