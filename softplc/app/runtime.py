@@ -30,13 +30,13 @@ from softplc.core.plant_role import RoleHolder
 from softplc.core.program import ProgramContext
 from softplc.util.plurals import plural
 from softplc.engine.program_control import register_program_commands
-from softplc.engine.retain import RetainStore, open_retained
+from softplc.engine.retained_values import RetainedValues
 from softplc.engine.runtime_commands import register_runtime_commands
 from softplc.engine.scan import ProgramInstance, ProgramState, ScanEngine, Task
 from softplc.engine.stall import StallDetector
 from softplc.config.system_tags import runtime_tag_definitions
 from softplc.engine.systags import SystemTags
-from softplc.core.tagdb import TagDatabase, WriteRejected
+from softplc.core.tagdb import TagDatabase
 from softplc.config.yamlsource import ConfigError, Location, Problem
 
 __all__ = ["Adapter", "AdapterError", "Runtime", "RuntimeState"]
@@ -102,12 +102,9 @@ class Runtime:
         self._background: list[asyncio.Task[Any]] = []
         self._stall: tuple[Task, str, str] | None = None
         self._stall_detector: StallDetector | None = None
-        self._retain: RetainStore | None = None
-        self._retain_enabled = retain
-        self._corrupt_retain = corrupt_retain
+        self.retained = RetainedValues(self.db, self.clock, self.state_dir / "retain.sqlite", corrupt_retain) if retain else None
         self.running = asyncio.Event()  # set once every adapter has started and scanning begins
         self.started_at: float | None = None  # clock time when scanning began
-        self._retain_dirty: dict[str, tuple[str, Any]] = {}  # tag → (type name, value) to save
         self._started = False
         self._drive: asyncio.Task[Any] | None = None
 
@@ -216,8 +213,8 @@ class Runtime:
         self._stop_event = asyncio.Event()
         if self.stop_reason:  # a stop requested before the start (an early Ctrl-C) still counts
             self._stop_event.set()
-        if self._retain_enabled:
-            self._load_retained()
+        if self.retained is not None:
+            self.retained.load()
         # Watching from before the first setup(): one that blocks at start-up is named too.
         self._stall_detector = StallDetector(self.engine, self._on_stall, stall_after=self._stall_after(), simulated=self.clock.simulated)
         self._stall_detector.start()
@@ -277,9 +274,8 @@ class Runtime:
         if self.db.forces:
             log.warning("%s released by the stop (forces are not retained): %s",
                         plural(len(self.db.forces), "forced tag"), ", ".join(force.tag for force in self.db.forces.active()))
-        self._flush_retained()
-        if self._retain is not None:
-            self._retain.close()
+        if self.retained is not None:
+            self.retained.close()  # saves what changed since the last save first
         self.state = RuntimeState.STOPPED
 
     async def run(self, duration: float | None = None, until: Condition | None = None) -> str:
@@ -320,8 +316,8 @@ class Runtime:
             await self.clock.sleep(0.5)
             self.system_tags.publish(self.clock.now())
             tick += 1
-            if tick % 2 == 0:
-                await self._save_retained()
+            if tick % 2 == 0 and self.retained is not None:
+                await self.retained.save()
 
     def _after_cycle(self, task: Task) -> None:
         if self._stall is not None:
@@ -367,35 +363,6 @@ class Runtime:
                 pass
         self._background.clear()
 
-    def _load_retained(self) -> None:
-        retained = [tag for tag in self.db if tag.definition.retain]
-        if not retained:
-            return
-        self._retain, stored = open_retained(self.state_dir / "retain.sqlite", self._corrupt_retain, self.clock.wall())
-        values: dict[str, Any] = {}
-        for tag in retained:
-            if tag.name not in stored:
-                continue
-            type_name, value = stored[tag.name]
-            try:
-                # The same rules as any write (type, min/max, text): the configuration may have
-                # changed since the value was saved, and a stored file is input like any other.
-                values[tag.name] = self.db.validate(tag.name, value, role=None)
-            except WriteRejected as rejected:
-                log.warning("retained value %r of %s (saved as %s) is refused: %s: %s; %s starts at its initial value %r",
-                            value, tag.name, type_name, rejected.rule.value, rejected.detail, tag.name, tag.definition.initial)
-        self.db.commit(values)
-        if values:
-            log.info("restored %s from %s", plural(len(values), "retained tag value"), self._retain.path)
-        self.db.on_change(self._note_retained)
-
-    def _note_retained(self, changed: Any) -> None:
-        for tag in changed:
-            if tag.definition.retain and not tag.forced:  # forces are not retained (softplc/core/forcing.py)
-                # The value now, on the loop thread: the saving thread never reads a changing tag,
-                # and a force applied later never reaches the store.
-                self._retain_dirty[tag.name] = (tag.definition.type.value, tag.value)
-
     def _apply_accepted_writes(self) -> None:
         """At stop: apply the writes still journaled (the scan that would have applied them has ended)."""
         try:
@@ -405,28 +372,6 @@ class Runtime:
             return
         if applied:
             log.info("stop: %s accepted before the stop applied", plural(applied, "write"))
-
-    def _flush_retained(self) -> None:
-        """Save retained changes now (at shutdown)."""
-        if self._retain is None or not self._retain_dirty:
-            return
-        dirty, self._retain_dirty = self._retain_dirty, {}
-        try:
-            self._retain.save(dirty)
-        except Exception as error:
-            log.error("cannot save retained values to %s: %s", self._retain.path, error)
-            self._retain_dirty = {**dirty, **self._retain_dirty}
-
-    async def _save_retained(self) -> None:
-        """Save retained changes off the event loop: the SQLite commit waits for the disk."""
-        if self._retain is None or not self._retain_dirty:
-            return
-        dirty, self._retain_dirty = self._retain_dirty, {}
-        try:
-            await self.clock.run_blocking(self._retain.save, dirty)
-        except Exception as error:
-            log.error("cannot save retained values to %s: %s", self._retain.path, error)
-            self._retain_dirty = {**dirty, **self._retain_dirty}  # newer changes win
 
 
 async def _quietly(coroutine: Coroutine[Any, Any, Any], name: str) -> None:

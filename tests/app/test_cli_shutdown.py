@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from conftest import REPO
-from test_cli import FREE_PORTS, SOFTPLC, Process, statistics
+from tests.app.test_cli import FREE_PORTS, SOFTPLC, Process, statistics
 
 CORE = REPO / "tests" / "core_programs.py"
 

@@ -16,7 +16,7 @@ from pymodbus.client import AsyncModbusTcpClient
 
 from conftest import REPO
 from opcua_support import PASSWORDS, add_users
-from test_cli import Process
+from tests.app.test_cli import Process
 
 CORE = REPO / "tests" / "core_programs.py"
 

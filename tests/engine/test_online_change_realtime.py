@@ -16,7 +16,7 @@ import pytest
 
 from softplc.core.clock import RealClock
 
-from test_online_change import Plant
+from tests.engine.test_online_change import Plant
 
 
 async def wait_until(condition: Callable[[], bool], timeout: float, what: str) -> None:

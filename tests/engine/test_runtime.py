@@ -472,14 +472,14 @@ async def test_retained_values_are_saved_in_the_background_on_the_real_clock(mak
     store_save = None
     await runtime.start()
     try:
-        assert runtime._retain is not None
-        store_save = runtime._retain.save
+        assert runtime.retained is not None and runtime.retained.store is not None
+        store_save = runtime.retained.store.save
 
         def recording_save(values: dict) -> None:
             saved_by.append(threading.current_thread().name)
             store_save(values)
 
-        runtime._retain.save = recording_save  # type: ignore[method-assign]
+        runtime.retained.store.save = recording_save  # type: ignore[method-assign]
         runtime.db.submit([("setpoint", 7.5)], "operator")
         deadline = time.monotonic() + 10
         while not saved_by:  # flushed once a second

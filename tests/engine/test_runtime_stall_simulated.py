@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from conftest import REPO
-from test_cli import Process
+from tests.app.test_cli import Process
 
 from softplc.core.clock import SimClock
 from softplc.app.runtime import Runtime, RuntimeState

@@ -18,7 +18,7 @@ from softplc.security.users import UserStore
 
 from conftest import REPO
 from opcua_support import PASSWORDS, TEST_HASH_COST
-from test_cli import Process
+from tests.app.test_cli import Process
 
 CORE = REPO / "tests" / "core_programs.py"
 ONE_OF_EACH = f"""
