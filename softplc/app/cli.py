@@ -19,7 +19,7 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from softplc import __version__
 from softplc.util import logs
@@ -31,6 +31,7 @@ from softplc.core.expression import Condition, ExpressionError
 from softplc.config.sections import editor_schema
 from softplc.config.yamlsource import ConfigError
 from softplc.util.plurals import plural
+from softplc.app.console_status import print_task_statistics, status_loop
 
 if TYPE_CHECKING:
     from softplc.engine.retain import RetainError
@@ -297,7 +298,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
             use_normal_priority_executor(loop)
         signals.attach(loop)  # a signal that came before (e.g. while the loop was created) stops the run now
-        status = asyncio.create_task(_status_loop(runtime, show_status, args))
+        status = asyncio.create_task(status_loop(runtime, show_status, args))
         try:
             return await runtime.run(duration=args.duration, until=until)
         finally:
@@ -354,64 +355,6 @@ def _retain_refused(error: RetainError) -> int:
         file=sys.stderr,
     )
     return EXIT_RETAIN_CORRUPT
-
-
-async def _status_loop(runtime: Any, show: bool, args: argparse.Namespace) -> None:
-    """Announce the adapters once they are up, then keep a one-line status (real time)."""
-    await runtime.running.wait()
-    for adapter in runtime.adapters:
-        for line in filter(None, adapter.describe().splitlines()):  # an adapter may serve in several places, or say nothing
-            print(f"serving: {line}", file=sys.stderr)
-    if not runtime.adapters:
-        print("serving: nothing (no server enabled)", file=sys.stderr)
-    from softplc.app.adapters import servers_off
-
-    for note in servers_off(runtime.config, args):
-        print(f"not serving: {note}", file=sys.stderr)
-    print("press Ctrl-C to stop", file=sys.stderr)
-    last_error = ""
-    while True:
-        await asyncio.sleep(0.5 if show else 1.0)
-        if runtime.error and runtime.error != last_error:
-            last_error = runtime.error
-            print(f"\nsoftplc: {runtime.state.value}: {runtime.error}", file=sys.stderr)
-        if show:
-            print("\r" + status_line(runtime) + "\033[K", end="", file=sys.stderr, flush=True)
-
-
-def status_line(runtime: Any) -> str:
-    parts = [f"{runtime.state.value}", f"t={runtime.clock.now():9.1f}s"]
-    for task in runtime.tasks:
-        stats = task.stats
-        parts.append(f"{task.name}: {plural(stats.cycles, 'cycle')}, {plural(stats.overruns, 'overrun')}")
-    faulted = [i.name for t in runtime.tasks for i in t.programs if i.state.value == "FAULTED"]
-    if faulted:
-        parts.append("FAULTED: " + ", ".join(faulted))
-    return " | ".join(parts)
-
-
-def print_task_statistics(runtime: Any, stream: TextIO) -> None:
-    header = ("task", "interval", "cycles", "overruns", "wd trips", "scan ms min/mean/p99/max", "latency ms min/mean/p99/max", "cycle ms mean/max")
-    rows = []
-    for task in runtime.tasks:
-        stats = task.stats
-        scan, latency, cycle = stats.scan.summary(), stats.latency.summary(), stats.cycle.summary()
-        rows.append([
-            task.name,
-            format_duration(task.interval),
-            str(stats.cycles),
-            str(stats.overruns),
-            str(stats.watchdog_trips),
-            "/".join(f"{scan[k]:.3f}" for k in ("min", "mean", "p99", "max")),
-            "/".join(f"{latency[k]:.3f}" for k in ("min", "mean", "p99", "max")),
-            "/".join(f"{cycle[k]:.3f}" for k in ("mean", "max")),
-        ])
-    if rows:
-        print_table(rows, header, stream)
-    for task in runtime.tasks:
-        for instance in task.programs:
-            if instance.state.value != "RUNNING":
-                print(f"program {instance.name}: {instance.state.value} {instance.error}", file=stream)
 
 
 if __name__ == "__main__":

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from softplc.clients.endpoints import DEFAULT_CONFIG, DEFAULT_ENDPOINT, endpoint_urls, pair_endpoints, reachable
 from softplc.protocols.opcua_names import DEFAULT_NAMESPACE
 
 if TYPE_CHECKING:  # asyncua is imported by connect() only: `softplc --help` must not load it
@@ -43,8 +44,6 @@ if TYPE_CHECKING:  # asyncua is imported by connect() only: `softplc --help` mus
 
 log = logging.getLogger(__name__)
 
-DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840/softplc/"
-DEFAULT_CONFIG = "tagdb.yaml"
 PASSWORD_ENV = "SOFTPLC_PASSWORD"
 MODE_NAMES = ("None", "Sign", "SignAndEncrypt")
 DEFAULT_CERTIFICATE_DIR = Path.home() / ".softplc" / "client"
@@ -170,37 +169,6 @@ def add_login_arguments(
     parser.set_defaults(password_env=password_env, login_config=endpoint)  # login_config: --config is ours (not, e.g., audit's)
 
 
-def endpoint_url(text: str) -> str:
-    """An `--endpoint` argument: opc.tcp://HOST[:PORT][/PATH], else argparse's error saying what is wrong."""
-    from urllib.parse import urlsplit
-
-    url = text.strip()
-    parts = urlsplit(url)
-    problem = None
-    if "://" not in url:
-        problem = "no scheme"
-    elif parts.scheme.lower() in ("http", "https"):
-        problem = f"{parts.scheme.lower()}:// is the address of a web page (the HMI), not of an OPC UA server"
-    elif parts.scheme.lower() != "opc.tcp":
-        problem = f"the scheme is {parts.scheme}://"
-    elif not parts.hostname:
-        problem = "no host"
-    else:
-        try:
-            parts.port  # noqa: B018 — raises for a port that is not a number from 0 to 65535
-        except ValueError:
-            port = parts.netloc.rpartition(":")[2]
-            problem = f"{port!r} is not a port number"
-    if problem is not None:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an OPC UA endpoint ({problem}): write opc.tcp://HOST:PORT/PATH, e.g. {DEFAULT_ENDPOINT}")
-    return url
-
-
-def endpoint_urls(text: str) -> str:
-    """An `--endpoint` argument naming one endpoint or a redundant pair's, comma separated; each checked like `endpoint_url`."""
-    return ",".join(endpoint_url(part) for part in text.split(",") if part.strip()) or endpoint_url(text)
-
-
 def _seconds(text: str) -> float:
     try:
         value = float(text)
@@ -245,7 +213,7 @@ def where(args: argparse.Namespace) -> tuple[str, str]:
         return endpoint or DEFAULT_ENDPOINT, namespace or DEFAULT_NAMESPACE
     section = _opcua_section(args.config)
     if endpoint is None:
-        endpoint = _pair_endpoints(args.config) or _reachable(section.get("endpoint")) or DEFAULT_ENDPOINT
+        endpoint = pair_endpoints(args.config) or reachable(section.get("endpoint")) or DEFAULT_ENDPOINT
     if namespace is None:
         namespace = section.get("namespace") if isinstance(section.get("namespace"), str) else DEFAULT_NAMESPACE
     return endpoint, namespace
@@ -270,35 +238,6 @@ def _opcua_section(config: str | None) -> dict[str, object]:
     servers = data.get("servers") if isinstance(data, dict) else None
     section = servers.get("opcua") if isinstance(servers, dict) else None
     return section if isinstance(section, dict) else {}
-
-
-def _pair_endpoints(config: str | None) -> str | None:
-    """The members' OPC UA endpoints of a redundant pair's configuration, comma separated (None: not a pair)."""
-    from softplc.config.yamlsource import ConfigError, load_yaml
-
-    path = Path(config or DEFAULT_CONFIG)
-    if not path.is_file():
-        return None
-    try:
-        data, _ = load_yaml(path)
-    except (ConfigError, OSError):
-        return None
-    section = data.get("redundancy") if isinstance(data, dict) else None
-    members = section.get("members") if isinstance(section, dict) else None
-    if not isinstance(members, dict):
-        return None
-    endpoints = [_reachable(entry.get("opcua")) for entry in members.values() if isinstance(entry, dict)]
-    return ",".join(endpoint for endpoint in endpoints if endpoint) or None
-
-
-def _reachable(endpoint: object) -> str | None:
-    """A configured endpoint as a client here reaches it: a server listening everywhere is reached on loopback."""
-    if not isinstance(endpoint, str) or not endpoint.strip():
-        return None
-    endpoint = endpoint.strip()
-    for wildcard in ("0.0.0.0", "[::]"):
-        endpoint = endpoint.replace(f"//{wildcard}:", "//127.0.0.1:")
-    return endpoint
 
 
 def with_certificate(security: Security, directory: Path = DEFAULT_CERTIFICATE_DIR) -> Security:

@@ -22,7 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from softplc.core.commands import CommandRefused
-from softplc.clients.login import LoginError, add_login_arguments, endpoint_url, login_from_args
+from softplc.clients.endpoints import endpoint_url
+from softplc.clients.login import LoginError, add_login_arguments, login_from_args
 from softplc.util.plurals import plural
 from softplc.util.timestamps import TIME_HELP, format_shown, parse_time
 

@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from softplc.clients.login import endpoint_urls
+from softplc.clients.endpoints import endpoint_urls
 from softplc.protocols.opcua_names import DEFAULT_NAMESPACE
 from softplc.robotics.layout import DEFAULT_MAP, DEFAULT_ROBOTS
 
