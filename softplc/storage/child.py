@@ -71,7 +71,10 @@ def main() -> int:
     reason = None if error is None else (str(error).strip() or type(error).__name__)
     out.send(("ready", reason))  # with the reason the store cannot be used now (the writer keeps trying)
     done = threading.Event()
-    reporter = threading.Thread(target=_report, args=(writer, out, done), name="stats", daemon=True)
+    # Figures are taken and sent under one lock: a report taken before a flush and sent after its
+    # reply would leave the runtime with figures older than the flush it was answered.
+    reporting = threading.Lock()
+    reporter = threading.Thread(target=_report, args=(writer, out, done, reporting), name="stats", daemon=True)
     reporter.start()
     while (message := receive(source)) is not None and message[0] != "stop":
         if message[0] == "rows":
@@ -79,8 +82,9 @@ def main() -> int:
         elif message[0] == "flush":
             _, request, maintain, timeout = message
             ok = writer.flush(timeout, maintain=maintain)
-            out.send(("stats", asdict(writer.stats)))
-            out.send(("flushed", request, ok))
+            with reporting:
+                out.send(("stats", asdict(writer.stats)))
+                out.send(("flushed", request, ok))
     writer.stop()
     done.set()
     reporter.join()
@@ -88,13 +92,14 @@ def main() -> int:
     return 0
 
 
-def _report(writer: BatchWriter, out: _Out, done: threading.Event) -> None:
+def _report(writer: BatchWriter, out: _Out, done: threading.Event, reporting: threading.Lock) -> None:
     last: dict[str, Any] = {}
     while not done.wait(STATS_PERIOD):
-        figures = asdict(writer.stats)
-        if figures != last:
-            out.send(("stats", figures))
-            last = figures
+        with reporting:
+            figures = asdict(writer.stats)
+            if figures != last:
+                out.send(("stats", figures))
+                last = figures
 
 
 if __name__ == "__main__":
