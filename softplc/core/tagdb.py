@@ -17,6 +17,10 @@ door is shut: client writes and forces are refused with rule NOT_ACTIVE, and int
 are dropped (the active's image is mirrored here instead, `softplc/engine/replication.py`).
 
 Programs' outputs are committed by the scan engine with `db.commit(...)`.
+
+One module of ~430 lines on purpose: the image, the journal, forcing's application and the door
+share the same private state and its ordering rules (a write journaled, then applied at the
+boundary, then notified); what a write is and the rules it may break are in `writes.py`.
 """
 
 from __future__ import annotations
