@@ -262,7 +262,8 @@ class BatchWriter:
         started = time.perf_counter()
         nul = self.database.postgresql  # PostgreSQL's text cannot hold a NUL; SQLite's can
         clean = {name: [escaped(row, nul) for row in rows] for name, rows in taken.items()}
-        changed = sum(new is not old for name, rows in taken.items() for new, old in zip(clean[name], rows))
+        changed_rows = {id(new) for name, rows in taken.items() for new, old in zip(clean[name], rows) if new is not old}
+        changed = len(changed_rows)
         unwritten = dict(clean)
         current, stack = "", []  # the sink being written, and its chunks still to write (the next one last)
         try:
@@ -287,6 +288,9 @@ class BatchWriter:
                             stack += [chunk[middle:], chunk[:middle]]
                         continue
                     stack.pop()
+                    if changed_rows:  # counted before the commit is told: a flush waiting on it sees the figure
+                        with self._lock:
+                            self.stats.escaped += sum(id(row) in changed_rows for row in chunk)
                     self._committed(len(chunk), started)
         except Exception as error:  # noqa: BLE001 — the store failed meanwhile: keep what was not committed
             _rollback_quietly(self._connection)
@@ -294,8 +298,6 @@ class BatchWriter:
                 unwritten[current] = [row for part in reversed(stack) for row in part]
             self._store_failed(error, unwritten)
         if changed:
-            with self._lock:
-                self.stats.escaped += changed
             self._report(f"{changed} rows held text no store can encode ({_reason(first_error)}); written with it escaped", log.warning)
 
     def _set_aside(self, sink: str, row: Any, error: BaseException) -> None:
