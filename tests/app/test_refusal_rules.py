@@ -71,3 +71,11 @@ def test_every_table_keyed_by_rule_covers_every_rule() -> None:
         if (file, name) not in PARTIAL_ON_PURPOSE and len(keys) < len(Rule)
     }
     assert not missing, f"tables that map refusal rules but miss some: {missing}"
+
+
+def test_a_standby_is_busy_for_modbus_and_in_an_invalid_state_for_opcua() -> None:
+    # A redundant pair's standby (docs/redundancy.md): "busy, retry later" — the client should write to the active.
+    from pymodbus.constants import ExcCodes
+
+    assert EXCEPTION_FOR_RULE[Rule.NOT_ACTIVE] is ExcCodes.DEVICE_BUSY
+    assert OPCUA_STATUS_FOR_RULE[Rule.NOT_ACTIVE] == ua.StatusCodes.BadInvalidState
