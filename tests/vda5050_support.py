@@ -170,6 +170,19 @@ class LibVehicles:
         self.process: Any = None
 
     @staticmethod
+    def require() -> None:
+        """Skip the test when vda-5050-lib is missing, except under CI (CI=true): there, fail it with what is missing."""
+        import os
+
+        import pytest
+
+        missing = LibVehicles.available()
+        if missing:
+            if os.environ.get("CI"):
+                pytest.fail(missing)
+            pytest.skip(missing)
+
+    @staticmethod
     def available() -> str:
         """'' when Node.js and vda-5050-lib are installed, else what is missing."""
         import shutil

@@ -29,6 +29,7 @@ from softplc.core.plant import Adapter, AdapterError
 from softplc.core.plant_role import RoleHolder
 from softplc.core.program import ProgramContext
 from softplc.util.plurals import plural
+from softplc.util.tasks import cancel_and_wait
 from softplc.engine.program_control import register_program_commands
 from softplc.engine.retained_values import RetainedValues
 from softplc.engine.runtime_commands import register_runtime_commands
@@ -354,13 +355,7 @@ class Runtime:
             self.error = f"{task.get_name()} crashed: {error!r}"
 
     async def _cancel_background(self) -> None:
-        for task in self._background:
-            task.cancel()
-        for task in self._background:
-            try:
-                await task
-            except (asyncio.CancelledError, Exception):
-                pass
+        await cancel_and_wait(self._background)
         self._background.clear()
 
     def _apply_accepted_writes(self) -> None:

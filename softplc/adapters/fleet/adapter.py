@@ -30,6 +30,7 @@ from softplc.adapters.fleet.settings import FleetSettings
 from softplc.util.plurals import plural
 from softplc.core.tagdb import Origin, TagDatabase
 from softplc.core.tags import Quality, Tag
+from softplc.util.tasks import cancel_and_wait
 
 if TYPE_CHECKING:
     from softplc.core.plant import Plant
@@ -228,13 +229,7 @@ class FleetAdapter:
         gc.freeze()
 
     async def stop(self) -> None:
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            try:
-                await task
-            except (asyncio.CancelledError, Exception):
-                pass
+        await cancel_and_wait(self._tasks)
         self._tasks.clear()
         if self._planning is not None:
             await self._planning.stop()

@@ -22,6 +22,7 @@ from softplc.core.clock import wait_for
 from softplc.core.plant import AdapterError, Plant
 from softplc.core.tagdb import WriteEvent
 from softplc.core.tags import Quality, Tag
+from softplc.util.tasks import cancel_and_wait
 
 if TYPE_CHECKING:
     from softplc.adapters.links.link import Link
@@ -73,9 +74,7 @@ class LinksAdapter:
         for undo in self._undo:
             undo()
         self._undo = []
-        for task in self._tasks:
-            task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
+        await cancel_and_wait(self._tasks)
         self._tasks = []
         for link in self.links.values():
             try:

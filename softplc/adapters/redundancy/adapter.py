@@ -26,6 +26,7 @@ from softplc.adapters.redundancy.sync_server import SyncServer
 from softplc.core.commands import Permission
 from softplc.core.plant import AdapterError
 from softplc.core.plant_role import PlantRole, RoleTerm
+from softplc.util.tasks import cancel_and_wait
 
 if TYPE_CHECKING:
     from softplc.adapters.redundancy.sync_client import SyncClient
@@ -119,9 +120,7 @@ class RedundancyAdapter:
         if plant is not None:
             term = plant.role.term
             plant.role.set(RoleTerm(PlantRole.FENCED, term.epoch, detail=f"this runtime ({self.settings.me.name}) is stopping"))
-        for task in self._tasks:
-            task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
+        await cancel_and_wait(self._tasks)
         for undo in self._undo:
             undo()
         await self.server.stop()

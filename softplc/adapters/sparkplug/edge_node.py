@@ -36,6 +36,7 @@ from softplc.protocols.sparkplug import payloads
 from softplc.protocols.sparkplug.sequence import BirthDeathSequence, MessageSequence
 from softplc.protocols.sparkplug.topics import HostState, device_topic, node_topic, parse_state, state_topic
 from softplc.util.peers import PeerLog
+from softplc.util.tasks import cancel_and_wait
 
 log = logging.getLogger(__name__)
 
@@ -134,9 +135,7 @@ class EdgeNode:
             self._flush_held()
         self.born = False
         await self.connection.close()
-        for task in self._tasks:
-            task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
+        await cancel_and_wait(self._tasks)
         if self.store is not None:
             self.store.close()
         self.status.running = self.status.connected = False

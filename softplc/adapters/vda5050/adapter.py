@@ -31,6 +31,7 @@ from softplc.protocols.vda5050.validation import MessageError, decode, parse_jso
 from softplc.robotics.roadmap import Roadmap
 from softplc.robotics.robots import DriverKind, RobotFile
 from softplc.util.peers import PeerLog
+from softplc.util.tasks import cancel_and_wait
 
 if TYPE_CHECKING:
     from softplc.core.plant import Plant
@@ -102,13 +103,7 @@ class VdaMaster:
                        plant.spawn(self._read(), "vda5050-inbox")]
 
     async def stop(self) -> None:
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            try:
-                await task
-            except (asyncio.CancelledError, Exception):
-                pass
+        await cancel_and_wait(self._tasks)
         self._tasks.clear()
         if self.connection is not None:
             await self.connection.close()

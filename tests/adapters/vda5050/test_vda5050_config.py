@@ -3,7 +3,6 @@ mistake located; and the embedded broker (amqtt) carrying a whole order to a vda
 
 from __future__ import annotations
 
-import os
 import socket
 import textwrap
 from pathlib import Path
@@ -116,11 +115,7 @@ def free_port() -> int:
 
 
 async def test_the_embedded_broker_carries_an_order_to_a_vda_5050_lib_vehicle(tmp_path: Path) -> None:
-    missing = LibVehicles.available()
-    if missing:
-        if os.environ.get("CI"):
-            pytest.fail(missing)
-        pytest.skip(missing)
+    LibVehicles.require()
     port = free_port()
     robot = vehicle_yaml("r01", "v1", 7.925, 5.925, manufacturer="acme", key="instantActions", speed=1.0)
     tagdb = write_plant(tmp_path, f"mqtt://127.0.0.1:{port}", [robot])

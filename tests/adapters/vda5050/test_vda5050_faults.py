@@ -20,11 +20,7 @@ P1, P3, T01_SRC, T02_SRC = (7.925, 5.925), (7.925, 2.925), (3.5, 7.5), (18.5, 7.
 
 @pytest.fixture(autouse=True)
 def vda_5050_lib() -> None:
-    missing = LibVehicles.available()
-    if missing:
-        if os.environ.get("CI"):
-            pytest.fail(missing)
-        pytest.skip(missing)
+    LibVehicles.require()
 
 
 def lib_vehicle(serial: str, x: float, y: float, node: str) -> dict:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -15,11 +14,7 @@ P1, P3, T01_SRC, T02_SRC, U2 = (7.925, 5.925), (7.925, 2.925), (3.5, 7.5), (18.5
 
 @pytest.fixture(autouse=True)
 def vda_5050_lib() -> None:
-    missing = LibVehicles.available()
-    if missing:
-        if os.environ.get("CI"):
-            pytest.fail(missing)
-        pytest.skip(missing)
+    LibVehicles.require()
 
 
 def lib_vehicle(serial: str, x: float, y: float, node: str) -> dict:

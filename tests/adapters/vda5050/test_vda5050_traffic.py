@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -39,11 +38,7 @@ def test_a_base_grows_only_onto_free_nodes_and_lanes_and_is_given_back_behind() 
 
 @pytest.fixture
 def vda_5050_lib() -> None:
-    missing = LibVehicles.available()
-    if missing:
-        if os.environ.get("CI"):
-            pytest.fail(missing)
-        pytest.skip(missing)
+    LibVehicles.require()
 
 
 def occupied(state: VehicleState) -> set[str]:
