@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from softplc.clients.endpoints import endpoint_urls
+from softplc.clients.robot_agent.signals import drive_until_signal
 from softplc.protocols.opcua_names import DEFAULT_NAMESPACE
 from softplc.robotics.layout import DEFAULT_MAP, DEFAULT_ROBOTS
 
@@ -114,7 +115,7 @@ def cmd_robot_agent(args: argparse.Namespace) -> int:
     name = f"robot-agent {args.robot}"
     print(f"{name} ({spec.name}): connecting to {args.endpoint}; Ctrl-C to stop", file=sys.stderr)
     try:
-        stopped_by = asyncio.run(_drive_until_signal(agent, name))
+        stopped_by = asyncio.run(drive_until_signal(agent, name, "the robot stands still, the session closes"))
     except AgentError as error:
         print(f"softplc {name}: {error}", file=sys.stderr)
         return EXIT_FAILURE
@@ -122,27 +123,3 @@ def cmd_robot_agent(args: argparse.Namespace) -> int:
         stopped_by = signal.SIGINT
     print(f"{name}: stopped", file=sys.stderr)
     return 130 if stopped_by == signal.SIGINT else EXIT_OK
-
-
-async def _drive_until_signal(agent: Any, name: str) -> int:
-    """Run the agent until SIGTERM or SIGINT (announced, the session closed); the signal's number."""
-    loop = asyncio.get_running_loop()
-    task = asyncio.current_task()
-    assert task is not None
-    received: list[int] = []
-
-    def stop(signum: int) -> None:
-        if not received:
-            print(f"{name}: {signal.Signals(signum).name} received, stopping (the robot stands still, the session closes)",
-                  file=sys.stderr)
-            task.cancel()
-        received.append(signum)
-
-    for signum in (signal.SIGTERM, signal.SIGINT):
-        loop.add_signal_handler(signum, stop, signum)
-    try:
-        await agent.run()
-    except asyncio.CancelledError:
-        if not received:
-            raise
-    return received[0] if received else 0

@@ -10,6 +10,7 @@ import signal
 import sys
 from urllib.parse import urlparse
 
+from softplc.clients.robot_agent.signals import drive_until_signal
 from softplc.protocols.mqtt_settings import DEFAULT_PORTS, MqttSettings, TlsSettings
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
@@ -48,7 +49,7 @@ def run_vehicle(args: argparse.Namespace) -> int:
     print(f"{name} ({spec.name}): VDA 5050 {args.protocol_version} vehicle {agent.manufacturer}/{agent.serial_number} "
           f"on {args.vda5050}; Ctrl-C to stop", file=sys.stderr)
     try:
-        stopped_by = asyncio.run(_until_signal(agent, name))
+        stopped_by = asyncio.run(drive_until_signal(agent, name))
     except KeyboardInterrupt:
         stopped_by = signal.SIGINT
     print(f"{name}: stopped (said OFFLINE)", file=sys.stderr)
@@ -62,25 +63,3 @@ class _Settings(MqttSettings):
         if self.password_file is None:
             return os.environ.get("SOFTPLC_PASSWORD") if self.username else None
         return super().password()
-
-
-async def _until_signal(agent: object, name: str) -> int:
-    loop = asyncio.get_running_loop()
-    task = asyncio.current_task()
-    assert task is not None
-    received: list[int] = []
-
-    def stop(signum: int) -> None:
-        if not received:
-            print(f"{name}: {signal.Signals(signum).name} received, stopping", file=sys.stderr)
-            task.cancel()
-        received.append(signum)
-
-    for signum in (signal.SIGTERM, signal.SIGINT):
-        loop.add_signal_handler(signum, stop, signum)
-    try:
-        await agent.run()  # type: ignore[attr-defined]
-    except asyncio.CancelledError:
-        if not received:
-            raise
-    return received[0] if received else 0
