@@ -56,6 +56,10 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+# Under a simulated clock, tag changes reach the address space at most 50 times a (real) second,
+# more often than any subscription samples; see publisher.py.
+SIMULATED_PUSH_PERIOD = 0.02
+
 
 class OpcUaServer:
     """Adapter: an asyncua server whose address space mirrors the plant's tag database."""
@@ -251,7 +255,8 @@ class OpcUaServer:
         db = plant.tags
         ns = self.namespace_index
         node_ids = {tag.name: tag_node_id(tag.name, ns) for tag in db}
-        self.publisher = Publisher(db, iserver.aspace, node_ids, guard=self.guard)
+        pace = SIMULATED_PUSH_PERIOD if plant.clock.simulated else 0.0
+        self.publisher = Publisher(db, iserver.aspace, node_ids, guard=self.guard, pace=pace)
         self.publisher.start()  # listen first: a change made while we build is pushed after
         builder = AddressSpaceBuilder(iserver.aspace, ns)
         roots = plan_folders((tag.definition for tag in db), self.settings.folder_size)
