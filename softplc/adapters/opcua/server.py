@@ -39,6 +39,7 @@ from softplc.adapters.opcua.history import MAX_NODES_PER_HISTORY_READ, HistoryPr
 from softplc.adapters.opcua.history_capabilities import advertise_history
 from softplc.adapters.opcua.history_provider import CommandHistory  # the historian's commands, when it runs
 from softplc.adapters.opcua.publisher import Publisher
+from softplc.adapters.opcua.standard_nodes import init_server
 from softplc.adapters.opcua.roles import RolePermissions
 from softplc.adapters.opcua.scheduling import ScanGuard
 from softplc.security.certificates import ClientCertificateValidator, Pki, SecuredChannels
@@ -166,7 +167,7 @@ class OpcUaServer:
 
     async def _build_server(self, server: Server, plant: Plant) -> None:
         settings = self.settings
-        await server.init()
+        await init_server(server)  # the standard nodes from this machine's cache after the first start
         server.iserver.view_service = SubtypeCachingViewService(server.iserver.aspace)  # Browse without re-walking type trees
         await server.set_application_uri(settings.application_uri)
         await server.set_build_info("urn:softplc", "softplc", "softplc", __version__, __version__, datetime.now(timezone.utc))
