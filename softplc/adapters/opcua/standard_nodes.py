@@ -7,6 +7,10 @@ asyncua and Python version) builds them as asyncua does and saves them to
 `$XDG_CACHE_HOME/softplc/` (default `~/.cache/softplc/`); later starts load that file. A cache that
 cannot be read, is not the user's own or is writable by others is ignored (and rebuilt), since
 unpickling runs what the file says; one that cannot be written is simply not kept.
+
+The price is memory: unpickled, the nodes hold ~140 MB of the process's memory where asyncua's
+build holds ~40 MB (measured with asyncua 2.1.0, Python 3.11). The OPC UA server therefore uses the
+cache only under a simulated clock, where start-up is a good part of a run that ends in seconds.
 """
 
 from __future__ import annotations

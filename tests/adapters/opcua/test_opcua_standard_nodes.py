@@ -10,6 +10,8 @@ import pytest
 from asyncua import Server, ua
 
 from softplc.adapters.opcua.standard_nodes import init_server
+from softplc.core.clock import RealClock, SimClock
+from tests.opcua_support import running_plant
 
 pytestmark = pytest.mark.asyncio
 
@@ -66,3 +68,12 @@ async def test_a_cache_that_cannot_be_written_only_costs_the_build(tmp_path: Pat
     blocker.write_text("a file where the cache directory would be")
     server = await _started(blocker / "nodes.pickle")
     assert (await _described(server))[0] > 5000
+
+
+@pytest.mark.parametrize("clock", [RealClock, SimClock])
+async def test_only_a_simulation_keeps_and_loads_the_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, clock: type) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    async with running_plant(tmp_path, security=("None",), clock=clock()):
+        pass
+    kept = list((tmp_path / "cache").glob("softplc/*.pickle"))
+    assert len(kept) == (1 if clock is SimClock else 0)
