@@ -50,6 +50,8 @@ def _leave_now(status: int) -> None:
 
     if threading.active_count() > 1:
         return  # a thread still working is joined by the ordinary exit, as Python does
+    if sys.getprofile() is not None or sys.gettrace() is not None:
+        return  # under a profiler or a debugger (python -m cProfile -m softplc ...): it reports at exit
     atexit._run_exitfuncs()  # logging's shutdown and any library's handlers, as at a normal exit
     for stream in (sys.stdout, sys.stderr):
         try:
