@@ -18,6 +18,9 @@ from typing import Any
 
 import numpy as np
 
+GRID_FROM = 64  # robots from which `near` looks in grid cells instead of at every robot
+GRID_CELL = 3.0  # metres, a cell's side: a robot's sense range (traffic.py) spans 2-3 cells
+
 ACTIVE_STATES = frozenset({"planning", "moving", "blocked"})
 PEER_TAGS = ("xpos", "ypos", "heading", "speed", "navstate", "radius", "route", "navreason")
 
@@ -67,6 +70,11 @@ class PeerView:
         self.reasons = [row[7] if len(row) > 7 and isinstance(row[7], str) else "" for row in rows]
         ranking = sorted(self.ids)
         self.rank = {robot_id: position for position, robot_id in enumerate(ranking)}
+        # Every robot asks for its neighbours every cycle, and each is the neighbour of a few:
+        # a Peer is made once per change of its robot's tags, and a large fleet's positions
+        # are sorted into grid cells once per change of any position (see `near`).
+        self._peers: list[Peer | None] = [None] * len(self.ids)
+        self._cells: dict[tuple[int, int], list[int]] | None = None
 
     @classmethod
     def from_tags(cls, ids: Sequence[str], value: Callable[[str], Any]) -> PeerView:
@@ -78,10 +86,13 @@ class PeerView:
 
     def update(self, position: int, tag: str, value: Any) -> None:
         """Take one changed tag value (`tag` is one of PEER_TAGS) of the robot at `position`."""
+        self._peers[position] = None
         if tag == "xpos":
             self.x[position] = _number(value)
+            self._cells = None
         elif tag == "ypos":
             self.y[position] = _number(value)
+            self._cells = None
         elif tag == "heading":
             self.heading[position] = _number(value)
         elif tag == "speed":
@@ -96,8 +107,12 @@ class PeerView:
             self.reasons[position] = value if isinstance(value, str) else ""
 
     def peer(self, position: int) -> Peer:
+        """The robot at `position` as a Peer (the same object until one of its tags changes: do not modify it)."""
+        known = self._peers[position]
+        if known is not None:
+            return known
         robot_id = self.ids[position]
-        return Peer(
+        known = self._peers[position] = Peer(
             robot_id,
             float(self.x[position]),
             float(self.y[position]),
@@ -109,17 +124,46 @@ class PeerView:
             decode_route(self.routes[position]) if self.active[position] else [],
             self.reasons[position],
         )
+        return known
 
     def near(self, robot_id: str, x: float, y: float, within: float) -> list[Peer]:
-        """Other robots whose centre is within `within` metres of (x, y), nearest first."""
+        """Other robots whose centre is within `within` metres of (x, y), nearest first (ties: by position)."""
         if not self.ids:
             return []
-        distance = np.hypot(self.x - x, self.y - y)
-        candidates = np.nonzero(distance <= within)[0]
         me = self.index.get(robot_id)
-        result = [int(c) for c in candidates if c != me]
-        result.sort(key=lambda c: distance[c])
-        return [self.peer(c) for c in result]
+        if len(self.ids) < GRID_FROM:
+            distance = np.hypot(self.x - x, self.y - y)
+            result = [int(c) for c in np.nonzero(distance <= within)[0] if c != me]
+            result.sort(key=lambda c: distance[c])
+            return [self.peer(c) for c in result]
+        # Only the robots of the grid cells within reach: the distance to each of a thousand
+        # robots, for each of them, every cycle, cost 13.5 µs of a ~60 µs step (1,000 robots), the grid 8.7 µs.
+        candidates = self._within_cells(x, y, within)
+        distance = np.hypot(self.x[candidates] - x, self.y[candidates] - y)
+        found = [(float(distance[i]), int(c)) for i, c in enumerate(candidates.tolist()) if distance[i] <= within and c != me]
+        found.sort()
+        return [self.peer(c) for _, c in found]
+
+    def _within_cells(self, x: float, y: float, within: float) -> np.ndarray:
+        """Positions, ascending, of the robots in the grid cells that can hold a centre within `within` of (x, y)."""
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(within)):
+            return np.arange(len(self.ids))  # no cell to look in: every robot, as without the grid
+        cells = self._cells
+        if cells is None:
+            cells = self._cells = {}
+            for position, (px, py) in enumerate(zip(self.x.tolist(), self.y.tolist())):
+                if math.isfinite(px) and math.isfinite(py):  # NaN and inf are near nothing
+                    cells.setdefault((math.floor(px / GRID_CELL), math.floor(py / GRID_CELL)), []).append(position)
+        found: list[int] = []
+        columns = range(math.floor((x - within) / GRID_CELL), math.floor((x + within) / GRID_CELL) + 1)
+        rows = range(math.floor((y - within) / GRID_CELL), math.floor((y + within) / GRID_CELL) + 1)
+        if len(columns) * len(rows) > len(self.ids):  # a reach over much of the floor: every robot is quicker
+            return np.arange(len(self.ids))
+        for i in columns:
+            for j in rows:
+                found.extend(cells.get((i, j), ()))
+        found.sort()
+        return np.array(found, dtype=np.intp)
 
     def rank_of(self, robot_id: str) -> int:
         return self.rank.get(robot_id, len(self.rank))

@@ -22,3 +22,15 @@ def test_percentile_equals_numpy(count):
 
 def test_percentile_of_nothing_is_zero():
     assert TimingSeries().percentile(99) == 0.0
+
+
+def test_a_series_of_one_value_has_that_value_as_every_percentile() -> None:
+    series = TimingSeries(window=100)
+    for _ in range(250):
+        series.add(0.1)
+    assert series.percentile(99) == series.percentile(1) == 0.1 == float(np.percentile(series.recent(100), 99))
+    series.add(0.2)
+    assert series.percentile(100) == 0.2 and series.percentile(0) == 0.1
+    series.reset()
+    series.add(0.0)
+    assert series.summary() == {"min": 0.0, "max": 0.0, "mean": 0.0, "p99": 0.0}

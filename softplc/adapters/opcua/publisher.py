@@ -8,12 +8,19 @@ yields to the event loop whenever it has worked for `slice_seconds`, so a 10 ms 
 its start latency and clients never see the server stall (asyncua clients drop their
 session after ~1 s of silence). A slice starts only when no scan cycle is about to start
 (see `scheduling.ScanGuard`).
+
+Under a simulated clock racing ahead (`pace`), pushes are at least `pace` real seconds apart:
+the first change after a quiet spell is pushed at once, the ones that follow gather (latest value
+each) until the period is over. A client sees the address space no less current in real time —
+its subscriptions sample in real time anyway — and ten simulated minutes no longer write every
+intermediate value into it (76,552 writes, a sixth of the run's time, for the default plant).
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 from collections.abc import Callable, Sequence
 
@@ -41,12 +48,15 @@ class Publisher:
         *,
         guard: ScanGuard | None = None,
         slice_seconds: float = 0.00025,
+        pace: float = 0.0,
     ) -> None:
         self.db = db
         self.aspace = aspace
         self.node_ids = node_ids
         self.guard = guard or ScanGuard()
         self.slice_seconds = slice_seconds
+        self.pace = pace  # least real seconds between two pushes (0: push at once)
+        self._last_push = -math.inf
         self._variant_types = {name: VARIANT_TYPES[db[name].definition.type] for name in node_ids}
         self.pushed = 0  # values written into the address space so far
         self._pending: dict[str, Tag] = {}
@@ -88,6 +98,13 @@ class Publisher:
     async def _push_forever(self) -> None:
         while True:
             await self._wake.wait()
+            if self.pace:
+                wait = self._last_push + self.pace - time.perf_counter()
+                if wait > 0:
+                    # Real time on purpose: the changes a racing simulated clock makes meanwhile
+                    # gather in _pending (the clock does not wait for a real-time timer).
+                    await asyncio.sleep(wait)
+                self._last_push = time.perf_counter()
             self._wake.clear()
             try:
                 await self.push_pending()

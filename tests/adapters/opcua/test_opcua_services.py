@@ -3,8 +3,10 @@ without a history provider) and Call, with the statuses of OPC UA Part 4."""
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import struct
+import time
 from datetime import datetime, timedelta, timezone
 
 import pytest
@@ -85,6 +87,29 @@ async def test_under_a_simulated_clock_current_time_is_the_simulated_time_of_the
     assert start <= status.StartTime <= status.CurrentTime
     assert count.SourceTimestamp <= now <= datetime.fromtimestamp(clock.wall(), timezone.utc)
     assert now - start < timedelta(hours=1)  # simulated time, not today's date
+
+
+async def test_under_a_racing_simulated_clock_the_address_space_follows_in_real_time_not_every_change(tmp_path) -> None:
+    clock = SimClock()  # as fast as possible: the 10 ms task runs thousands of cycles a second
+    async with running_plant(tmp_path, security=("None",), clock=clock) as (runtime, server):
+        aspace = server.server.iserver.aspace
+        count = server.node_id("count")
+        await wait_until(lambda: clock.now() > 20)
+        publisher = server.publisher
+        pushed, started = publisher.pushed, time.perf_counter()
+        cycles_before = runtime.db.value("count")
+        await asyncio.sleep(0.5)
+        seen = runtime.db.value("count")
+        await asyncio.sleep(0.1)  # more than the pace: the latest value has been pushed since
+        shown = aspace.read_attribute_value(count, ua.AttributeIds.Value).Value.Value
+        elapsed = time.perf_counter() - started
+        pushes = publisher.pushed - pushed
+        cycles = runtime.db.value("count") - cycles_before
+    assert shown >= seen  # never more than one period behind
+    # Every cycle changes count and ramp; pushed at every change that is two values a cycle.
+    # Paced by real time (a push per period of the changes gathered), it is a few per period.
+    assert cycles > 500, f"only {cycles} cycles in {elapsed:.2f} s: the clock did not race"
+    assert pushes * 10 < cycles, f"{pushes} values pushed for {cycles} cycles in {elapsed:.2f} s"
 
 
 # -- HistoryRead -------------------------------------------------------------------------------
