@@ -30,8 +30,8 @@ sys.path.insert(0, str(REPO))
 
 from softplc.adapters.alarms.engine import AlarmEngine  # noqa: E402
 from softplc.adapters.alarms.settings import AlarmSettings  # noqa: E402
-from softplc.core.clock import RealClock  # noqa: E402
 from softplc.config import parse_config  # noqa: E402
+from softplc.core.clock import RealClock  # noqa: E402
 from softplc.core.events import Event  # noqa: E402
 from softplc.core.tagdb import TagDatabase  # noqa: E402
 

@@ -188,9 +188,9 @@ def softplc_read(endpoint: str, directory: Path) -> tuple[float, bool]:
 async def run(directory: Path, seconds: float, count: int, per_scan: int, alarms: bool, read_every: float,
               profile: Path | None) -> dict[str, Any]:
     from softplc.app.adapters import build_adapters
-    from softplc.core.clock import RealClock
-    from softplc.config import load_config
     from softplc.app.runtime import Runtime
+    from softplc.config import load_config
+    from softplc.core.clock import RealClock
     from softplc.core.tagdb import Origin
 
     path = directory / "tagdb.yaml"
@@ -270,9 +270,9 @@ async def run(directory: Path, seconds: float, count: int, per_scan: int, alarms
 async def simulated_cost(directory: Path, count: int, per_scan: int, seconds: float) -> tuple[int, float, float]:
     """The alarm engine alone (no servers) on the simulated clock: transitions, CPU s in evaluations (journal rows included), process CPU s."""
     from softplc.app.adapters import build_adapters
-    from softplc.core.clock import SimClock
-    from softplc.config import load_config
     from softplc.app.runtime import Runtime
+    from softplc.config import load_config
+    from softplc.core.clock import SimClock
     from softplc.core.tagdb import Origin
 
     path = directory / "tagdb.yaml"

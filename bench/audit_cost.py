@@ -40,10 +40,10 @@ sys.path.insert(0, str(REPO))
 
 from bench.timing import load_average  # noqa: E402
 from softplc.app.adapters import build_adapters  # noqa: E402
-from softplc.core.clock import RealClock  # noqa: E402
-from softplc.config import parse_config  # noqa: E402
-from softplc.core.roles import Role  # noqa: E402
 from softplc.app.runtime import Runtime  # noqa: E402
+from softplc.config import parse_config  # noqa: E402
+from softplc.core.clock import RealClock  # noqa: E402
+from softplc.core.roles import Role  # noqa: E402
 from softplc.core.tagdb import Origin  # noqa: E402
 
 CORE = REPO / "tests" / "core_programs.py"
@@ -181,9 +181,9 @@ def count_entries(recorder: Any, since: float) -> int:
 
 def client(port: int, address: int, per_batch: int, period: float) -> None:
     """The Modbus writer (another process): `per_batch` registers in one request every `period` seconds."""
-    from pymodbus.client import ModbusTcpClient
-
     import signal
+
+    from pymodbus.client import ModbusTcpClient
 
     signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
     connection = ModbusTcpClient("127.0.0.1", port=port, timeout=2, retries=0)

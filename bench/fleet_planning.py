@@ -35,15 +35,15 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from softplc.core.clock import RealClock, SimClock  # noqa: E402
-from softplc.config import load_config  # noqa: E402
 from softplc.adapters.fleet.adapter import FleetAdapter  # noqa: E402
+from softplc.app.runtime import Runtime  # noqa: E402
+from softplc.config import load_config  # noqa: E402
+from softplc.core.clock import RealClock, SimClock  # noqa: E402
 from softplc.robotics.driver import PlanRequest  # noqa: E402
 from softplc.robotics.floor import Floor  # noqa: E402
 from softplc.robotics.gridmap import load_map  # noqa: E402
 from softplc.robotics.planning import ClockPlanning, ProcessPlanning  # noqa: E402
 from softplc.robotics.robots import load_robots  # noqa: E402
-from softplc.app.runtime import Runtime  # noqa: E402
 
 FACTORY = REPO / "robots" / "maps" / "factory.yaml"
 POINTS = [(3.5, 7.5), (1.8, 2.5), (18.5, 7.5), (20.1, 2.4), (7.925, 5.925), (7.925, 2.925), (7.925, 4.525)]
@@ -138,6 +138,10 @@ async def one_robot() -> list[float]:
         (folder / "tagdb.yaml").write_text(text)
         (folder / "robots").mkdir()
         (folder / "robots" / "robots.yaml").write_text((REPO / "robots" / "robots.yaml").read_text())
+        # What the plant names beside its robots file: the tasks, the maps, the HMI's views.
+        for shared in ("robots/tasks.yaml", "robots/maps", "robots/roadmap.yaml", "hmi"):
+            if (REPO / shared).exists():
+                (folder / shared).symlink_to(REPO / shared)
         config = load_config(folder / "tagdb.yaml")
         runtime = Runtime(config, SimClock(), state_dir=folder / "state")
         fleet = FleetAdapter(load_robots(folder / "robots" / "robots.yaml"), load_map(FACTORY))

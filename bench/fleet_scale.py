@@ -30,12 +30,12 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from softplc.core.clock import RealClock  # noqa: E402
-from softplc.config import load_config  # noqa: E402
 from softplc.adapters.fleet.adapter import FleetAdapter  # noqa: E402
+from softplc.app.runtime import Runtime  # noqa: E402
+from softplc.config import load_config  # noqa: E402
+from softplc.core.clock import RealClock  # noqa: E402
 from softplc.robotics.gridmap import OccupancyGrid  # noqa: E402
 from softplc.robotics.robots import load_robots  # noqa: E402
-from softplc.app.runtime import Runtime  # noqa: E402
 
 GOAL_ROBOTS = 1000
 WIDTH, HEIGHT, LANE, SPACING = 100.0, 60.0, 2.0, 1.5

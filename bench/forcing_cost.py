@@ -29,10 +29,10 @@ sys.path.insert(0, str(REPO))
 
 from bench.timing import load_average  # noqa: E402
 from softplc import InOut, Program  # noqa: E402
-from softplc.core.clock import SimClock  # noqa: E402
-from softplc.config import parse_config  # noqa: E402
-from softplc.core.roles import Role  # noqa: E402
 from softplc.app.runtime import Runtime  # noqa: E402
+from softplc.config import parse_config  # noqa: E402
+from softplc.core.clock import SimClock  # noqa: E402
+from softplc.core.roles import Role  # noqa: E402
 from softplc.core.tagdb import Origin  # noqa: E402
 
 BOUND = 1000

@@ -77,9 +77,9 @@ servers: {{opcua: {{enabled: false}}, modbus: {{enabled: false}}, hmi: {{enabled
 async def measure(args: argparse.Namespace, state: Path) -> dict[str, float]:
     """One run (in a child process): the plant with or without history, `args.seconds` after the warm-up."""
     from softplc.app.adapters import build_adapters
-    from softplc.core.clock import RealClock
-    from softplc.config import parse_config
     from softplc.app.runtime import Runtime
+    from softplc.config import parse_config
+    from softplc.core.clock import RealClock
 
     if args.rt_priority is not None:  # as `softplc run --rt-priority N`: the loop's thread preempts other processes
         from softplc.util.realtime import set_realtime_priority, use_normal_priority_executor
@@ -173,8 +173,8 @@ def recording_cost(tags: int, rounds: int = 20) -> tuple[float, float]:
     from softplc.adapters.history.recorder import TagFilter
     from softplc.adapters.history.settings import TagPolicy
     from softplc.adapters.history.store import HistorySink, TagInfo
-    from softplc.storage import Database, StorageSettings
     from softplc.core.tags import Quality
+    from softplc.storage import Database, StorageSettings
 
     names = [f"v{index:05d}" for index in range(tags)]
     filters = [TagFilter(name, TagPolicy(), numeric=True) for name in names]

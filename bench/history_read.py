@@ -66,9 +66,9 @@ def prefill(state: Path) -> None:
 
 async def serve(args: argparse.Namespace, state: Path) -> None:
     from softplc.app.adapters import build_adapters
-    from softplc.core.clock import RealClock
-    from softplc.config import parse_config
     from softplc.app.runtime import Runtime
+    from softplc.config import parse_config
+    from softplc.core.clock import RealClock
     from tests.opcua_support import add_users
 
     add_users(state)

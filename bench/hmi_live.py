@@ -257,9 +257,9 @@ async def main(args: argparse.Namespace) -> None:
     from playwright.async_api import async_playwright
     from pymodbus.client import AsyncModbusTcpClient
 
-    from softplc.config import load_config
     from softplc.adapters.modbus.address_map import build_address_map
     from softplc.adapters.modbus.settings import ModbusSettings
+    from softplc.config import load_config
 
     folder = Path(tempfile.mkdtemp(prefix="hmi-bench-"))
     config_path = make_plant(folder, args.tags, args.rate, show=args.page == 'show')

@@ -41,7 +41,15 @@ sys.path.insert(0, str(REPO))
 
 from bench.latency_naive import NaiveServer  # noqa: E402
 from bench.opcua_roundtrip import Floor, floor_at  # noqa: E402
-from softplc.latency.measurement import Measurement, Sample, Target, conditions, cpu_counters, finish_conditions, measure  # noqa: E402
+from softplc.latency.measurement import (  # noqa: E402
+    Measurement,
+    Sample,
+    Target,
+    conditions,
+    cpu_counters,
+    finish_conditions,
+    measure,
+)
 from softplc.latency.report import print_report, to_json, write_csv  # noqa: E402
 
 

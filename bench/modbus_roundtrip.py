@@ -27,8 +27,8 @@ from pathlib import Path
 
 from pymodbus.client import AsyncModbusTcpClient
 
-from softplc.config import load_config
 from softplc.adapters.modbus.address_map import build_address_map
+from softplc.config import load_config
 
 REPO = Path(__file__).resolve().parent.parent
 GOALS_MS = {"FC3 x1": 2.0, "FC3 x125": 3.0, "FC16 x2": 2.0, "write-to-visible": 15.0}

@@ -184,12 +184,12 @@ async def _wait_line(process: asyncio.subprocess.Process, prefix: str, timeout: 
 
 
 async def _measure(args: argparse.Namespace) -> tuple[Recorder, dict[str, float]]:
+    from softplc.adapters.opcua import OpcUaServer
     from softplc.app.adapters import build_adapters
     from softplc.app.cli import build_parser
-    from softplc.core.clock import RealClock
-    from softplc.adapters.opcua import OpcUaServer
-    from softplc.util.realtime import use_normal_priority_executor
     from softplc.app.runtime import Runtime
+    from softplc.core.clock import RealClock
+    from softplc.util.realtime import use_normal_priority_executor
 
     if args.rt_priority is not None:
         use_normal_priority_executor(asyncio.get_running_loop())

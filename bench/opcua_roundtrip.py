@@ -40,9 +40,17 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from asyncua import Client, ua  # noqa: E402
-
 from opcua_common import (  # noqa: E402
-    PASSWORD, USER, changing_tags, floor_plant_yaml, goal, on_publish, percentile, plant_yaml, start_server, task_latency,
+    PASSWORD,
+    USER,
+    changing_tags,
+    floor_plant_yaml,
+    goal,
+    on_publish,
+    percentile,
+    plant_yaml,
+    start_server,
+    task_latency,
 )
 
 DELIVERY_GOAL_MS = 5.0

@@ -26,7 +26,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from asyncua import Client, ua  # noqa: E402
-
 from opcua_common import goal, plant_yaml, start_server  # noqa: E402
 
 GOAL_SECONDS = 3.0

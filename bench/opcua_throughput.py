@@ -25,7 +25,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from asyncua import Client, ua  # noqa: E402
-
 from opcua_common import changing_tags, goal, on_publish, plant_yaml, start_server, task_latency  # noqa: E402
 
 RATE_GOAL = 20_000

@@ -166,8 +166,8 @@ class Churn(Program):
 
 
 def cost_plant(folder: Path, tags: int, interval: str, etcd: str) -> Path:
-    from tests.adapters.redundancy.pair_support import NO_SERVERS, free_port
     from softplc.security.pair_certificates import make_pair
+    from tests.adapters.redundancy.pair_support import NO_SERVERS, free_port
 
     make_pair(folder / "pair", "a", "bench")
     make_pair(folder / "pair", "b", "bench")

@@ -39,14 +39,14 @@ sys.path.insert(0, str(REPO))
 from softplc import InOut, Input, Program  # noqa: E402
 from softplc.app.adapters import build_adapters  # noqa: E402
 from softplc.app.cli import build_parser  # noqa: E402
-from softplc.core.clock import RealClock  # noqa: E402
+from softplc.app.runtime import Runtime  # noqa: E402
 from softplc.config import ProgramConfig, TaskConfig, load_config  # noqa: E402
+from softplc.core.clock import RealClock  # noqa: E402
 from softplc.core.datatypes import DataType  # noqa: E402
+from softplc.core.tags import TagDef  # noqa: E402
+from softplc.engine.scan import RestartPolicy  # noqa: E402
 from softplc.util.durations import format_duration, parse_duration  # noqa: E402
 from softplc.util.realtime import set_realtime_priority, use_normal_priority_executor  # noqa: E402
-from softplc.app.runtime import Runtime  # noqa: E402
-from softplc.engine.scan import RestartPolicy  # noqa: E402
-from softplc.core.tags import TagDef  # noqa: E402
 
 GOAL_P99_MS = 1.0
 GOAL_MAX_MS = 5.0

@@ -10,12 +10,12 @@ from pathlib import Path
 from typing import Any
 
 from softplc.app.adapters import build_adapters
+from softplc.app.runtime import Runtime
+from softplc.config import load_config
 from softplc.core.clock import RealClock, SimClock
 from softplc.core.commands import CommandRefused
-from softplc.config import load_config
 from softplc.core.events import Event
 from softplc.core.roles import Role
-from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
 from softplc.core.tags import Quality
 

@@ -16,13 +16,13 @@ from typing import Any
 from asyncua import Client, ua
 
 from softplc import InOut, Program
+from softplc.adapters.audit.recorder import AuditRecorder
 from softplc.app.adapters import build_adapters
+from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
 from softplc.storage.audit.entry import AuditEntry
 from softplc.storage.audit.queries import AuditQuery
-from softplc.adapters.audit.recorder import AuditRecorder
-from softplc.core.clock import RealClock
-from softplc.config import load_config
-from softplc.app.runtime import Runtime
 from tests.conftest import REPO
 from tests.opcua_support import PASSWORDS, add_users
 

@@ -8,11 +8,11 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from softplc.core.clock import Clock, SimClock
-from softplc.config import load_config
 from softplc.adapters.fleet.adapter import FleetAdapter
-from softplc.robotics.gridmap import OccupancyGrid
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import Clock, SimClock
+from softplc.robotics.gridmap import OccupancyGrid
 
 ROBOT_TEMPLATE = """\
 version: 1

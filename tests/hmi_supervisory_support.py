@@ -11,12 +11,13 @@ from pathlib import Path
 from typing import Any
 
 from hmi_support import Plant, add_users
-from softplc.app.adapters import build_adapters
-from softplc.core.clock import RealClock
-from softplc.config import load_config
+
 from softplc.adapters.hmi.server import HmiServer
 from softplc.adapters.hmi.settings import HmiSettings
+from softplc.app.adapters import build_adapters
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
 
 PLANT = textwrap.dedent("""
     version: 1

@@ -20,13 +20,13 @@ from typing import Any
 import aiohttp
 import pytest_asyncio
 
-from softplc.core.clock import RealClock
-from softplc.config import load_config
 from softplc.adapters.hmi.server import HmiServer
 from softplc.adapters.hmi.settings import HmiSettings
+from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
 from softplc.core.program import InOut, Input, Output, Program
 from softplc.core.roles import Role
-from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
 from softplc.security.users import UserStore
 

@@ -226,8 +226,8 @@ class SoftplcRemote:
               hmi: {{enabled: false}}
             """))
         self.state = directory / "remote-state"
-        from softplc.security.users import UserStore
         from softplc.core.roles import Role
+        from softplc.security.users import UserStore
 
         UserStore(self.state / "users.yaml").add("link", Role.OPERATOR, self.PASSWORD)
         (directory / "link.password").write_text(self.PASSWORD + "\n")

@@ -16,12 +16,12 @@ from typing import Any
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
-from softplc.core.clock import RealClock
-from softplc.config import load_config
 from softplc.adapters.modbus.server import ModbusAdapter
 from softplc.adapters.modbus.settings import ModbusSettings
-from softplc.core.program import Input, Output, Program
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
+from softplc.core.program import Input, Output, Program
 
 
 @dataclass

@@ -20,9 +20,9 @@ from pathlib import Path
 from typing import Any
 
 from softplc.app.adapters import build_adapters
-from softplc.core.clock import SimClock
-from softplc.config import load_config
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import SimClock
 from softplc.core.tagdb import Origin
 from softplc.core.tags import Quality
 from tests.conftest import REPO

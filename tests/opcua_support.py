@@ -13,12 +13,12 @@ from typing import Any
 from asyncua import Client
 
 from softplc import InOut, Input, Output, Program
-from softplc.core.clock import Clock, RealClock
-from softplc.config import load_config
 from softplc.adapters.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
-from softplc.protocols.opcua_client import ClientCertificate, ensure_client_certificate, pem_certificate
 from softplc.adapters.opcua.history import HistoryProvider
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import Clock, RealClock
+from softplc.protocols.opcua_client import ClientCertificate, ensure_client_certificate, pem_certificate
 
 PASSWORDS = {"viewer": "viewer-pass-1", "operator": "operator-pass-1", "engineer": "engineer-pass-1"}
 TEST_HASH_COST = 10  # log2 N of the tests' password hashes: milliseconds, not the default's ~0.4 s

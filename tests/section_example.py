@@ -6,10 +6,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from softplc.core.datatypes import DataType
-from softplc.util.durations import check_duration
 from softplc.config.schema import DURATION, Section
+from softplc.core.datatypes import DataType
 from softplc.core.tags import Access, TagDef
+from softplc.util.durations import check_duration
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

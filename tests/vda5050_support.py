@@ -10,14 +10,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from conftest import REPO
+
 from softplc.app.runtime import Runtime
 from softplc.config import load_config
 from softplc.core.clock import RealClock
 from softplc.protocols.mqtt import MqttConnection
 from softplc.protocols.mqtt_settings import MqttSettings
 from softplc.protocols.vda5050.validation import problems
-
-from conftest import REPO
 
 MAP = REPO / "robots" / "maps" / "factory.yaml"
 ROADMAP = REPO / "robots" / "roadmap.yaml"

@@ -22,16 +22,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from softplc import __version__
-from softplc.util import logs
-from softplc.core.clock import RealClock, SimClock
+from softplc.app.console_status import print_task_statistics, status_loop
 from softplc.config import PlantConfig, load_config
-from softplc.util.console import print_table
-from softplc.util.durations import format_duration
-from softplc.core.expression import Condition, ExpressionError
 from softplc.config.sections import editor_schema
 from softplc.config.yamlsource import ConfigError
+from softplc.core.clock import RealClock, SimClock
+from softplc.core.expression import Condition, ExpressionError
+from softplc.util import logs
+from softplc.util.console import print_table
+from softplc.util.durations import format_duration
 from softplc.util.plurals import plural
-from softplc.app.console_status import print_task_statistics, status_loop
 
 if TYPE_CHECKING:
     from softplc.engine.retain import RetainError
@@ -172,7 +172,6 @@ def _print_problems(error: ConfigError, stream: TextIO | None = None) -> None:
 
 def cmd_check(args: argparse.Namespace) -> int:
     from softplc.app.adapters import build_adapters
-
     from softplc.app.runtime import Runtime
 
     config = load_config(args.config)
@@ -235,10 +234,10 @@ def cmd_tags(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from softplc.app.adapters import build_adapters
-    from softplc.engine.retain import RetainError
     from softplc.app.runtime import AdapterError, Runtime
     from softplc.app.stop_signals import StopSignals
     from softplc.app.stop_signals import describe as describe_signal
+    from softplc.engine.retain import RetainError
 
     config = load_config(args.config)
     if args.speed is not None and not args.sim:

@@ -18,27 +18,27 @@ from pathlib import Path
 from typing import Any
 
 from softplc.app.plant import RuntimePlant
+from softplc.config import PlantConfig
+from softplc.config.system_tags import runtime_tag_definitions
+from softplc.config.yamlsource import ConfigError, Location, Problem
 from softplc.core.clock import Clock, PlantTime, RealClock, SimClock
 from softplc.core.commands import Commands
-from softplc.config import PlantConfig
-from softplc.util.durations import parse_duration
 from softplc.core.events import EventBus
 from softplc.core.expression import Condition
-from softplc.engine.online_change.change import OnlineChange
 from softplc.core.plant import Adapter, AdapterError
 from softplc.core.plant_role import RoleHolder
 from softplc.core.program import ProgramContext
-from softplc.util.plurals import plural
-from softplc.util.tasks import cancel_and_wait
+from softplc.core.tagdb import TagDatabase
+from softplc.engine.online_change.change import OnlineChange
 from softplc.engine.program_control import register_program_commands
 from softplc.engine.retained_values import RetainedValues
 from softplc.engine.runtime_commands import register_runtime_commands
 from softplc.engine.scan import ProgramInstance, ProgramState, ScanEngine, Task
 from softplc.engine.stall import StallDetector
-from softplc.config.system_tags import runtime_tag_definitions
 from softplc.engine.systags import SystemTags
-from softplc.core.tagdb import TagDatabase
-from softplc.config.yamlsource import ConfigError, Location, Problem
+from softplc.util.durations import parse_duration
+from softplc.util.plurals import plural
+from softplc.util.tasks import cancel_and_wait
 
 __all__ = ["Adapter", "AdapterError", "Runtime", "RuntimeState"]
 

@@ -17,6 +17,7 @@ if TYPE_CHECKING:  # asyncua is imported when a command runs: `softplc --help` m
     from asyncua import Client
 
 from softplc.protocols.opcua_names import COMMANDS_OBJECT
+
 NOT_ALLOWED = "not_allowed"  # the session's role may not call it (BadUserAccessDenied)
 NO_DOOR = "no_door"  # the server has no Objects/Commands: no softplc, or one older than the door
 REFUSED = "refused"  # the runtime refused it, in its own words (or the server answered another bad status)

@@ -19,9 +19,9 @@ from typing import TYPE_CHECKING, Any
 from asyncua import Client, ua
 
 from softplc.core.datatypes import DataType
+from softplc.core.tags import Access, Quality, TagDef
 from softplc.protocols.opcua_variants import DATA_TYPE_IDS
 from softplc.util.suggest import did_you_mean
-from softplc.core.tags import Access, Quality, TagDef
 
 if TYPE_CHECKING:
     from softplc.clients.login import Login

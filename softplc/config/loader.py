@@ -15,9 +15,9 @@ from softplc.config.plant import PlantConfig
 from softplc.config.programs import ModuleLoader, ProgramChecker
 from softplc.config.reactions import legacy_problems
 from softplc.config.schema_check import describe, schema_check
+from softplc.config.sections import config_schema, contributed_tags, section_problems
 from softplc.config.tags import TagChecker
 from softplc.config.tasks import TaskChecker
-from softplc.config.sections import config_schema, contributed_tags, section_problems
 from softplc.config.yamlsource import ConfigError, SourceMap, load_yaml, parse_yaml
 
 

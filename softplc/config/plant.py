@@ -7,11 +7,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from softplc.core.program import Program
-from softplc.core.fault_reaction import FaultReaction
-from softplc.core.fault_reaction import NEVER, RestartPolicy
-from softplc.core.tags import TagDef
 from softplc.config.yamlsource import Location, Problem, SourceMap
+from softplc.core.fault_reaction import NEVER, FaultReaction, RestartPolicy
+from softplc.core.program import Program
+from softplc.core.tags import TagDef
 
 SYSTEM_PREFIX = "_sys."
 

@@ -15,12 +15,11 @@ from typing import Any
 from softplc.config.findings import Findings
 from softplc.config.programs import Write, substitute
 from softplc.config.tags import TagChecker
-from softplc.core.datatypes import TypeMismatch
-from softplc.util.durations import check_duration
-from softplc.core.fault_reaction import HOLD, INITIAL, FaultReaction
-from softplc.core.fault_reaction import NEVER, RestartPolicy
-from softplc.util.suggest import did_you_mean
 from softplc.config.yamlsource import Problem, SourceMap
+from softplc.core.datatypes import TypeMismatch
+from softplc.core.fault_reaction import HOLD, INITIAL, NEVER, FaultReaction, RestartPolicy
+from softplc.util.durations import check_duration
+from softplc.util.suggest import did_you_mean
 
 LEGACY_KEYS = ("restart_delay", "max_restarts")
 LEGACY_ON_FAULT = ("stop", "restart")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from softplc.util.durations import check_duration
 from softplc.config.schema import DURATION, Section
+from softplc.util.durations import check_duration
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

@@ -17,9 +17,9 @@ from softplc.core.datatypes import TYPE_NAMES
 from softplc.util.durations import DURATION_REGEX
 
 if TYPE_CHECKING:
-    from softplc.core.tags import TagDef
     from softplc.config.plant import PlantConfig
     from softplc.config.yamlsource import Problem
+    from softplc.core.tags import TagDef
 
 NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
 NAME_RULE = "ASCII letters, digits and _, not starting with a digit"

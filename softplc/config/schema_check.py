@@ -5,8 +5,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from softplc.config.schema import NAME_RULE
-from softplc.util.suggest import did_you_mean
 from softplc.config.yamlsource import Problem, SourceMap
+from softplc.util.suggest import did_you_mean
 
 if TYPE_CHECKING:
     import jsonschema

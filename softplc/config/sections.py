@@ -22,8 +22,8 @@ from softplc.config.schema import Section, build_schema, check_registry, strict_
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig
-    from softplc.core.tags import TagDef
     from softplc.config.yamlsource import Problem
+    from softplc.core.tags import TagDef
 
 @functools.cache
 def registered() -> tuple[Section, ...]:

@@ -7,12 +7,12 @@ from pathlib import Path
 from typing import Any
 
 from softplc.config.findings import Findings
-from softplc.config.templates import template_instances
-from softplc.core.datatypes import DataType, TypeMismatch
 from softplc.config.sections import tag_keys, template_keys
-from softplc.util.suggest import did_you_mean
-from softplc.core.tags import Access, TagDef
+from softplc.config.templates import template_instances
 from softplc.config.yamlsource import Location
+from softplc.core.datatypes import DataType, TypeMismatch
+from softplc.core.tags import Access, TagDef
+from softplc.util.suggest import did_you_mean
 
 
 class TagChecker:

@@ -8,9 +8,9 @@ from softplc.config.findings import Findings
 from softplc.config.plant import ProgramConfig, TaskConfig
 from softplc.config.programs import ProgramChecker, Write, substitute
 from softplc.config.reactions import fault_reaction, restart_policy
+from softplc.config.sections import program_keys
 from softplc.config.tags import TagChecker
 from softplc.util.durations import check_duration
-from softplc.config.sections import program_keys
 from softplc.util.suggest import did_you_mean
 
 SHORTEST_INTERVAL = 1e-4

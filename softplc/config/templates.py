@@ -9,8 +9,8 @@ from typing import Any
 
 from softplc.config.findings import Findings
 from softplc.config.schema import NAME_PATTERN, NAME_RULE
-from softplc.util.suggest import did_you_mean
 from softplc.config.yamlsource import ConfigError, Location, SourceMap, load_yaml
+from softplc.util.suggest import did_you_mean
 
 # template → instance → tag → (initial value, where it is written), from instances_from
 ExternalInitials = dict[str, dict[str, tuple[Any, Location]]]

@@ -19,10 +19,9 @@ from typing import Any
 
 from softplc.core.fault_reaction import NEVER, FaultReaction, RestartPolicy
 from softplc.core.function_blocks import warm_start
-from softplc.util.log_format import BRIEF_TRACEBACK
 from softplc.core.program import Direction, Program, program_log
 from softplc.core.tagdb import Rule, TagDatabase, WriteRejected
-
+from softplc.util.log_format import BRIEF_TRACEBACK
 
 
 class ProgramState(enum.Enum):

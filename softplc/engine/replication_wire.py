@@ -28,7 +28,7 @@ from softplc.core.tagdb import KEEP_VALUE, TagDatabase, Write
 from softplc.core.tags import Quality
 from softplc.engine.program_instance import ProgramState
 from softplc.engine.program_state import ProgramStateError
-from softplc.engine.replication import CycleState, ProgramImage, Replication, ReplicationError, SYSTEM_PREFIX
+from softplc.engine.replication import SYSTEM_PREFIX, CycleState, ProgramImage, Replication, ReplicationError
 
 _QUALITIES = {quality.value: quality for quality in Quality}
 _ROLES = {role.value: role for role in Role}

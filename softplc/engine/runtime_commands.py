@@ -15,9 +15,9 @@ from typing import Any, Protocol
 
 from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.core.datatypes import TypeMismatch
-from softplc.util.plurals import plural
-from softplc.engine.scan import ProgramState, Task
 from softplc.core.tagdb import Origin, TagDatabase, WriteRejected
+from softplc.engine.scan import ProgramState, Task
+from softplc.util.plurals import plural
 
 
 class _Runtime(Protocol):

@@ -25,9 +25,9 @@ from typing import Any
 
 from softplc.core.clock import Clock
 from softplc.core.plant_role import RoleHolder
-from softplc.engine.program_instance import NEVER, ProgramInstance, ProgramState, RestartPolicy
 from softplc.core.stats import TimingSeries
 from softplc.core.tagdb import TagDatabase
+from softplc.engine.program_instance import NEVER, ProgramInstance, ProgramState, RestartPolicy
 
 __all__ = ["NEVER", "CurrentScan", "ProgramInstance", "ProgramState", "RestartPolicy", "ScanEngine", "Task", "TaskStats"]
 

@@ -11,8 +11,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from softplc.latency.plant import SCENARIO_NAMES, PlantMissing, scenario_durations
 from softplc.clients.login import LoginError, add_login_arguments, read_password
+from softplc.latency.plant import SCENARIO_NAMES, PlantMissing, scenario_durations
 
 if TYPE_CHECKING:
     from softplc.latency.results import Measurement

@@ -17,8 +17,8 @@ log = logging.getLogger(__name__)
 def with_opcua_login(target: Target, state_dir: Path) -> Target:
     """Our OPC UA server lets anonymous clients only read: give the client an operator login
     (and, for --security Sign/SignAndEncrypt, a client certificate the server trusts)."""
-    from softplc.latency.certificate import Security, make_client_certificate
     from softplc.adapters.opcua import DEFAULT_NAMESPACE, Pki, Role, UserStore
+    from softplc.latency.certificate import Security, make_client_certificate
 
     password = secrets.token_urlsafe(18)
     UserStore(state_dir / "users.yaml").add("latency", Role.OPERATOR, password)

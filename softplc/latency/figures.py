@@ -11,8 +11,8 @@ matplotlib.use("Agg")  # headless: files only, no display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from softplc.latency.results import Measurement  # noqa: E402
 from softplc.latency.report import hires_delays, plc_delays  # noqa: E402
+from softplc.latency.results import Measurement  # noqa: E402
 from softplc.latency.statistics import DelayStatistics, summarize  # noqa: E402
 
 

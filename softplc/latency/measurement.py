@@ -64,8 +64,8 @@ async def _measure(target: Target, result: Measurement, progress: Progress, stop
         await run_client(target, result, progress, stop)
         return
     from softplc.app.adapters import build_adapters
-    from softplc.core.clock import RealClock
     from softplc.app.runtime import Runtime
+    from softplc.core.clock import RealClock
 
     with tempfile.TemporaryDirectory(prefix="softplc-latency-") as state_dir:
         state = Path(state_dir)

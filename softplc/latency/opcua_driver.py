@@ -17,7 +17,6 @@ import time
 from typing import Any
 
 from asyncua import Client, Node, ua
-
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 
 from softplc.latency.certificate import MODES, Security, application_uri

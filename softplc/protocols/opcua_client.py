@@ -26,7 +26,8 @@ from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-from softplc.security.certificates import der_bytes, fingerprint as der_fingerprint, load_certificate_file
+from softplc.security.certificates import der_bytes, load_certificate_file
+from softplc.security.certificates import fingerprint as der_fingerprint
 
 _MODES = {
     "Basic256Sha256_Sign": ua.MessageSecurityMode.Sign,

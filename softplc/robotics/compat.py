@@ -17,7 +17,15 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from softplc.robotics.robots import RobotFile, RobotSpec, TaskFile, TaskSpec, load_robots, load_tasks, unknown_id_message
+from softplc.robotics.robots import (
+    RobotFile,
+    RobotSpec,
+    TaskFile,
+    TaskSpec,
+    load_robots,
+    load_tasks,
+    unknown_id_message,
+)
 
 
 def incompatibilities(robot: RobotSpec, task: TaskSpec) -> list[str]:

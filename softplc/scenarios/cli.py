@@ -7,9 +7,9 @@ import json
 import sys
 from pathlib import Path
 
-from softplc.util.plurals import plural
-from softplc.scenarios.spec import DISPATCHERS, STOPS, builtin_scenarios, find_scenario, load_scenario
 from softplc.config.yamlsource import ConfigError
+from softplc.scenarios.spec import DISPATCHERS, STOPS, builtin_scenarios, find_scenario, load_scenario
+from softplc.util.plurals import plural
 
 EXIT_OK, EXIT_FAILURE = 0, 1
 

@@ -10,13 +10,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from softplc.config import PlantConfig
 from softplc.adapters.fleet.adapter import FleetAdapter
+from softplc.app.runtime import Adapter
+from softplc.config import PlantConfig
 from softplc.robotics.compat import compatible_tasks as compatible
 from softplc.robotics.floor import Floor
 from softplc.robotics.gridmap import load_map
 from softplc.robotics.robots import NO_TEAM_LIMIT, Hardware, Point, Pose, RobotFile, RobotSpec, TaskSpec
-from softplc.app.runtime import Adapter
 from softplc.scenarios.spec import PROJECT, RobotParams, Scenario, TaskParams
 
 MAP = PROJECT / "robots" / "maps" / "factory.yaml"

@@ -14,8 +14,8 @@ from typing import Any
 import yaml
 
 from softplc.config import PlantConfig, parse_config
-from softplc.scenarios.spec import PROJECT, Scenario
 from softplc.config.yamlsource import ConfigError, Location, Problem, load_yaml
+from softplc.scenarios.spec import PROJECT, Scenario
 
 ROBOT_TAGS: dict[str, dict[str, Any]] = {
     "xpos": {"type": "float64", "unit": "m", "access": "ro", "description": "x position"},

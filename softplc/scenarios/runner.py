@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from softplc.core.clock import SimClock
-from softplc.config import PlantConfig
 from softplc.app.runtime import Adapter, Runtime
+from softplc.config import PlantConfig
+from softplc.core.clock import SimClock
 from softplc.scenarios.plant import build_plant
 from softplc.scenarios.recorder import Recorder
 from softplc.scenarios.spec import Scenario
@@ -157,7 +157,6 @@ def write_outputs(result: RunResult, out_dir: Path, plant_text: str, figures: bo
     files["plant"] = plant_path
     if figures:
         from softplc.scenarios.figures import draw_figures
-
         from softplc.scenarios.fleet import factory_floor
 
         files.update(draw_figures(result.scenario, result.recorder, out_dir, factory_floor().grid))

@@ -12,9 +12,9 @@ from pathlib import Path
 from typing import Any
 
 from softplc.config import did_you_mean, schema_problems
-from softplc.robotics.robots import HARDWARE_NAMES
 from softplc.config.schema import NAME_PATTERN
 from softplc.config.yamlsource import ConfigError, SourceMap, load_yaml
+from softplc.robotics.robots import HARDWARE_NAMES
 
 PROJECT = Path(__file__).resolve().parent.parent.parent
 BUILTIN_DIR = PROJECT / "scenarios"

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from softplc.core.tagdb import TagDatabase
 from softplc.scenarios.recorder import Recorder
 from softplc.scenarios.spec import Scenario
-from softplc.core.tagdb import TagDatabase
 
 
 def summarise(scenario: Scenario, db: TagDatabase, recorder: Recorder, duration: float, stop_reason: str) -> dict[str, Any]:

@@ -23,9 +23,10 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from softplc.security.passwords import SCRYPT_LOG2_N, hash_password, verify_password
-from softplc.core.roles import ROLE_NAMES, Role
+
 from softplc.config.yamlsource import ConfigError, load_yaml
+from softplc.core.roles import ROLE_NAMES, Role
+from softplc.security.passwords import SCRYPT_LOG2_N, hash_password, verify_password
 
 log = logging.getLogger(__name__)
 

@@ -33,8 +33,8 @@ and both backends from `storage_database` (see tests/conftest.py).
 
 from softplc.storage.database import Backend, Database, StorageError, remove_sqlite_store
 from softplc.storage.partitions import PartitionCatalogue, insert_rows
-from softplc.storage.sql import escape_like, like_pattern, plant_and_time
 from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, storage_problems
+from softplc.storage.sql import escape_like, like_pattern, plant_and_time
 from softplc.storage.writer import BatchWriter, Sink, WriterStats
 
 __all__ = [

@@ -8,9 +8,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from softplc.config.yamlsource import Problem, SourceMap
 from softplc.util.durations import parse_duration
 from softplc.util.timestamps import parse_span
-from softplc.config.yamlsource import Problem, SourceMap
 
 BACKENDS = ("sqlite", "postgresql")
 DEFAULT_FLUSH_PERIOD = 1.0

@@ -8,7 +8,6 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
-from softplc.util.plurals import plural
 from softplc.svm.dataset import (
     RULES,
     DatasetError,
@@ -20,6 +19,7 @@ from softplc.svm.dataset import (
     read_dataset,
 )
 from softplc.svm.model import ESTIMATORS, ModelError, TaskModel, save_estimator, train
+from softplc.util.plurals import plural
 
 EXIT_OK, EXIT_FAILURE = 0, 1
 

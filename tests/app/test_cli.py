@@ -19,11 +19,10 @@ from pathlib import Path
 import jsonschema
 import pytest
 import yaml
+from conftest import REPO
 
 from softplc.app.cli import main
 from softplc.config import load_config
-
-from conftest import REPO
 
 SOFTPLC = str(Path(sys.executable).parent / "softplc")
 # Real-time runs serve on free ports: other plants on this machine may hold the default ones.

@@ -12,8 +12,8 @@ import time
 from pathlib import Path
 
 import pytest
-
 from conftest import REPO
+
 from tests.app.test_cli import FREE_PORTS, SOFTPLC, Process, statistics
 
 CORE = REPO / "tests" / "core_programs.py"

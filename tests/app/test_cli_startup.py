@@ -15,8 +15,8 @@ import sys
 from collections.abc import Iterator
 
 import pytest
-
 from conftest import REPO
+
 from softplc.app.cli import build_parser
 
 HEAVY = ("asyncua", "pymodbus", "numpy", "scipy", "sklearn", "matplotlib", "jsonschema")
@@ -83,9 +83,9 @@ def test_check_imports_what_the_adapters_need_and_no_more() -> None:
 
 
 def test_choices_copied_for_a_light_parser_match_their_source() -> None:
+    from softplc.adapters.opcua import cli as opcua_cli
     from softplc.clients.robot_agent import agent
     from softplc.clients.robot_agent import cli as fleet_cli
-    from softplc.adapters.opcua import cli as opcua_cli
     from softplc.core import roles
     assert opcua_cli.ROLE_NAMES == roles.ROLE_NAMES
     assert fleet_cli.AGENT_NAMESPACE == agent.DEFAULT_NAMESPACE

@@ -14,12 +14,12 @@ from asyncua import Client, ua
 from modbus_helpers import value_of, words_of
 from pymodbus.client import AsyncModbusTcpClient
 
-from softplc.core.clock import RealClock
-from softplc.config import load_config
 from softplc.adapters.modbus.server import ModbusAdapter
 from softplc.adapters.modbus.settings import ModbusSettings
 from softplc.adapters.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
 from softplc.core.tagdb import Origin
 
 PLANT = """

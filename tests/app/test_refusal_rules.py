@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 from asyncua import ua
-
 from conftest import REPO
-from softplc.clients.tags import writing as live_writing
+
 from softplc.adapters.modbus.server import EXCEPTION_FOR_RULE
 from softplc.adapters.opcua.writes import _RULE_CODES as OPCUA_STATUS_FOR_RULE
+from softplc.clients.tags import writing as live_writing
 from softplc.core.tagdb import Rule
 
 # Tables keyed by Rule that are partial on purpose, with why.

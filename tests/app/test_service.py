@@ -9,7 +9,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-
 from tools_support import missing
 
 from softplc.app.cli import build_parser, cmd_run

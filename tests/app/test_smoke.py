@@ -1,12 +1,12 @@
 """The default plant (tagdb.yaml) runs on the simulated clock and its robots deliver material."""
 
-from softplc.core.clock import SimClock
-from softplc.config import load_config
-from softplc.core.expression import Condition
-from softplc.app.runtime import Runtime
-from softplc.engine.scan import ProgramState
-
 from conftest import REPO
+
+from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import SimClock
+from softplc.core.expression import Condition
+from softplc.engine.scan import ProgramState
 
 
 async def test_default_plant_delivers_until_an_output_storage_is_full(tmp_path):

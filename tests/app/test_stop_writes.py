@@ -12,10 +12,10 @@ import sqlite3
 from pathlib import Path
 
 from asyncua import Client, ua
-from pymodbus.client import AsyncModbusTcpClient
-
 from conftest import REPO
 from opcua_support import PASSWORDS, add_users
+from pymodbus.client import AsyncModbusTcpClient
+
 from tests.app.test_cli import Process
 
 CORE = REPO / "tests" / "core_programs.py"

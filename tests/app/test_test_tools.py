@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from conftest import REPO
 
 # Test files that need a tool found on PATH, and the words their refusal contains.

@@ -12,10 +12,10 @@ import textwrap
 from pathlib import Path
 
 from softplc.app.adapters import build_adapters
-from softplc.core.clock import SimClock
-from softplc.config import load_config
-from softplc.core.roles import Role
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import SimClock
+from softplc.core.roles import Role
 from softplc.core.tagdb import Origin
 from tests.audit_support import PASSWORDS, adapter, running, softplc, wait_until
 

@@ -18,12 +18,12 @@ from typing import Any
 
 import pytest
 
-from softplc.core.datatypes import TypeMismatch
 from softplc.adapters.opcua import OpcUaServer, Pki
-from softplc.protocols.opcua_client import ensure_client_certificate
-from softplc.core.roles import Role
 from softplc.app.runtime import Runtime
+from softplc.core.datatypes import TypeMismatch
+from softplc.core.roles import Role
 from softplc.core.tagdb import Origin, Rule, WriteRejected
+from softplc.protocols.opcua_client import ensure_client_certificate
 from tests.conftest import REPO
 from tests.opcua_support import PASSWORDS, running_plant, wait_until
 

@@ -15,9 +15,9 @@ import time
 from pathlib import Path
 
 from softplc.core.tagdb import Origin
+from tests.clients.test_live_cli import force
 from tests.conftest import REPO
 from tests.opcua_support import running_plant
-from tests.clients.test_live_cli import force
 
 ROWS, COLUMNS = 30, 120
 

@@ -6,18 +6,15 @@ It calls `programs.apply` through the OPC UA door to the runtime's commands (sof
 from __future__ import annotations
 
 import asyncio
-import re
 import os
+import re
 import sys
 import textwrap
 import uuid
 from pathlib import Path
 
-
-
-from opcua_support import PASSWORDS, running_plant  # noqa: E402
-
 from conftest import REPO  # noqa: E402
+from opcua_support import PASSWORDS, running_plant  # noqa: E402
 
 PROGRAM = '''
 from softplc import InOut, Output, Program

@@ -7,13 +7,12 @@ import json
 import jsonschema
 import pytest
 import yaml
+from conftest import REPO
 
 from softplc.config import PlantConfig, load_config
-from softplc.core.datatypes import DataType
 from softplc.config.sections import config_schema
+from softplc.core.datatypes import DataType
 from softplc.core.tags import Access
-
-from conftest import REPO
 
 PROGRAMS = REPO / "tests" / "configs" / "sample_programs.py"
 
@@ -159,8 +158,8 @@ def test_for_each_list_bindings_and_params(make_config) -> None:
 
 
 async def test_list_bindings_run(make_config, tmp_path) -> None:
-    from softplc.core.clock import SimClock
     from softplc.app.runtime import Runtime
+    from softplc.core.clock import SimClock
 
     runtime = Runtime(_summer_config(make_config), SimClock(), state_dir=tmp_path)
     await runtime.run(duration=0.1)

@@ -11,12 +11,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from conftest import REPO
 
 from softplc.app.cli import main
 from softplc.config import load_config
 from softplc.config.yamlsource import ConfigError
-
-from conftest import REPO
 
 BAD = REPO / "tests" / "configs" / "bad"
 CORPUS = sorted(BAD.glob("*.yaml"))

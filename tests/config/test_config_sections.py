@@ -11,15 +11,13 @@ from pathlib import Path
 
 import jsonschema
 import pytest
+from conftest import REPO
 
-from softplc.config import schema, sections
 from softplc.app.cli import main
-from softplc.core.roles import Role
-from softplc.config import load_config
+from softplc.config import load_config, schema, sections
 from softplc.config.schema import RegistryError, Section
 from softplc.config.yamlsource import ConfigError
-
-from conftest import REPO
+from softplc.core.roles import Role
 
 HEAVY = ("asyncua", "pymodbus", "numpy", "scipy", "sklearn", "matplotlib", "jsonschema")
 
@@ -161,10 +159,10 @@ def test_owners_cannot_claim_the_same_section_or_key_or_a_core_one() -> None:
 
 
 def test_an_owner_adds_tags_to_the_runtime_like_the_system_tags(with_notebook, tmp_path: Path, capsys) -> None:
-    from softplc.core.clock import SimClock
     from softplc.adapters.modbus.address_map import Table, build_address_map
     from softplc.adapters.modbus.settings import ModbusSettings
     from softplc.app.runtime import Runtime
+    from softplc.core.clock import SimClock
 
     path = tmp_path / "plant.yaml"
     path.write_text("version: 1\ntags: {level: {type: float32}}\nnotebook: {database: h.sqlite}\nservers: {modbus: {}}\n")

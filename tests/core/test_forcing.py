@@ -5,14 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from conftest import REPO
 
+from softplc.app.runtime import Runtime
 from softplc.core.clock import SimClock
 from softplc.core.commands import CommandRefused
 from softplc.core.roles import Role
-from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin, Rule
-
-from conftest import REPO
 
 CORE = REPO / "tests" / "core_programs.py"
 ENGINEER = Origin("hmi", user="erin", role=Role.ENGINEER)

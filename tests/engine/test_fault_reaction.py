@@ -8,13 +8,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import REPO
 
+from softplc.app.runtime import Runtime
 from softplc.core.clock import SimClock
 from softplc.core.roles import Role
-from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
-
-from conftest import REPO
 
 CORE = REPO / "tests" / "core_programs.py"
 ENGINEER = Origin("hmi", "erin", role=Role.ENGINEER)

@@ -10,16 +10,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import REPO
 
+from softplc.app.runtime import Runtime
+from softplc.config import load_config
 from softplc.core.clock import Clock, SimClock
 from softplc.core.commands import CommandRefused
-from softplc.config import load_config
-from softplc.engine.online_change.change import ChangeRefused
 from softplc.core.roles import Role
-from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
-
-from conftest import REPO
+from softplc.engine.online_change.change import ChangeRefused
 
 ENGINEER = Origin("cli", "erin", "127.0.0.1", role=Role.ENGINEER)
 

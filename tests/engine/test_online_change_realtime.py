@@ -15,7 +15,6 @@ from pathlib import Path
 import pytest
 
 from softplc.core.clock import RealClock
-
 from tests.engine.test_online_change import Plant
 
 
@@ -58,8 +57,8 @@ async def test_a_10ms_task_misses_no_cycle_while_its_program_is_changed_online(t
 
 
 async def test_a_new_version_whose_setup_does_not_return_is_reported_and_blocks_the_next_change(tmp_path: Path, monkeypatch) -> None:
-    from softplc.engine.online_change import change as online_change
     from softplc.core.commands import CommandRefused
+    from softplc.engine.online_change import change as online_change
 
     monkeypatch.setattr(online_change, "CHECK_TIMEOUT", 0.3)
     plant = Plant(tmp_path, RealClock())

@@ -6,14 +6,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import REPO
 
+from softplc.app.runtime import Runtime
 from softplc.core.clock import SimClock
 from softplc.core.commands import CommandRefused
 from softplc.core.roles import Role
-from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
-
-from conftest import REPO
 
 CORE = REPO / "tests" / "core_programs.py"
 ENGINEER = Origin("hmi", "erin", "127.0.0.1", role=Role.ENGINEER)

@@ -10,17 +10,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import REPO
 
+from softplc.app.runtime import Runtime
+from softplc.config import load_config
 from softplc.core.clock import SimClock
 from softplc.core.commands import CommandRefused
-from softplc.config import load_config
 from softplc.core.expression import Condition
 from softplc.core.roles import Role
-from softplc.app.runtime import Runtime
 from softplc.core.tagdb import Origin
 from softplc.core.tags import Quality
-
-from conftest import REPO
 
 CORE = REPO / "tests" / "core_programs.py"
 

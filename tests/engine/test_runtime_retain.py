@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from softplc.app.cli import main
+from softplc.app.runtime import Runtime
 from softplc.core.clock import SimClock
 from softplc.engine.retain import RetainError, RetainStore
-from softplc.app.runtime import Runtime
 
 RETAIN = """
 version: 1

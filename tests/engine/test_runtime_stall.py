@@ -12,11 +12,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-
-from softplc.core.clock import RealClock
-from softplc.app.runtime import Runtime, RuntimeState
-
 from conftest import REPO
+
+from softplc.app.runtime import Runtime, RuntimeState
+from softplc.core.clock import RealClock
 
 CORE = REPO / "tests" / "core_programs.py"
 STUCK_IN_SETUP = "task fast is stuck in setup() of program slow for "

@@ -10,12 +10,12 @@ import time
 from pathlib import Path
 
 from conftest import REPO
-from tests.app.test_cli import Process
 
-from softplc.core.clock import SimClock
 from softplc.app.runtime import Runtime, RuntimeState
+from softplc.core.clock import SimClock
 from softplc.engine.scan import ProgramState
 from softplc.engine.stall import StallDetector
+from tests.app.test_cli import Process
 
 CORE = REPO / "tests" / "core_programs.py"
 

@@ -9,11 +9,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
-from softplc.core.clock import SimClock
-from softplc.app.runtime import Runtime
-
 from conftest import REPO
+
+from softplc.app.runtime import Runtime
+from softplc.core.clock import SimClock
 
 CORE = REPO / "tests" / "core_programs.py"
 

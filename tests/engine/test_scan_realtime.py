@@ -10,12 +10,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from conftest import REPO
 
+from softplc.app.runtime import Runtime, RuntimeState
 from softplc.core.clock import RealClock
 from softplc.core.expression import Condition
-from softplc.app.runtime import Runtime, RuntimeState
-
-from conftest import REPO
 
 CORE = REPO / "tests" / "core_programs.py"
 

@@ -7,22 +7,21 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import pytest
-
-from softplc.core.clock import SimClock
-from softplc.config import PlantConfig, load_config
-from softplc.app.runtime import Runtime
-from softplc.engine.scan import ProgramState
-
 from conftest import REPO
+
+from softplc.app.runtime import Runtime
+from softplc.config import PlantConfig, load_config
+from softplc.core.clock import SimClock
+from softplc.engine.scan import ProgramState
 
 HANDSHAKE_YAML = REPO / "programs" / "handshake.yaml"
 
 
 def handshake_config(scenario: str = "fast", scan: str = "10ms") -> PlantConfig:
     """programs/handshake.yaml with the scenario and scan applied (as `softplc latency` does)."""
-    from softplc.config import parse_config
-
     import yaml
+
+    from softplc.config import parse_config
 
     data = yaml.safe_load(HANDSHAKE_YAML.read_text())
     data["tasks"]["handshake"]["interval"] = scan

@@ -8,14 +8,14 @@ from typing import Any
 import pytest
 
 from softplc.app.adapters import build_adapters
+from softplc.app.runtime import Runtime
 from softplc.core.clock import RealClock
+from softplc.core.roles import Role
 from softplc.latency.client import HandshakeClient
 from softplc.latency.driver import DriverError
 from softplc.latency.opcua_driver import DEFAULT_NODE_IDS, OpcuaDriver
 from softplc.latency.plant import handshake_config
-from softplc.core.roles import Role
 from softplc.security.users import UserStore
-from softplc.app.runtime import Runtime
 
 PASSWORD = "handshake-test-password"
 

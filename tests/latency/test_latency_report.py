@@ -9,11 +9,10 @@ import re
 import sys
 
 import pytest
+from conftest import REPO
 
 from softplc.latency.measurement import Measurement, Sample, Target
 from softplc.latency.report import CSV_FIELDS, print_report, to_json, write_csv
-
-from conftest import REPO
 
 
 def finished_run(delays: list[float], protocol: str = "opcua", security: str | None = None, label: str = "") -> Measurement:

@@ -11,15 +11,14 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import REPO
 
+from softplc.app.runtime import Runtime
 from softplc.core.clock import RealClock
 from softplc.latency.measurement import Measurement, Target, measure
 from softplc.latency.plant import handshake_config
 from softplc.latency.progress import summary
 from softplc.latency.report import to_json
-from softplc.app.runtime import Runtime
-
-from conftest import REPO
 
 SAMPLES = 24
 
@@ -184,8 +183,8 @@ async def _serve_handshake(tmp_path: Path, protocol: str) -> tuple[Runtime, str]
 
 async def test_endpoint_opcua_against_a_second_runtime(tmp_path):
     """Signed and encrypted, logged in as an operator, with a client certificate the server trusts."""
-    from softplc.latency.certificate import make_client_certificate
     from softplc.adapters.opcua import Pki
+    from softplc.latency.certificate import make_client_certificate
 
     certificate, key = make_client_certificate(tmp_path / "client")
     Pki(tmp_path / "pki").trust(str(certificate))
@@ -225,8 +224,8 @@ def test_the_documented_operator_login_lands_where_the_run_looks(tmp_path):
     import shutil
     import subprocess
 
-    from softplc.config import load_config
     from softplc.adapters.opcua import UserStore
+    from softplc.config import load_config
 
     for name in ("handshake.yaml", "handshake.py"):
         shutil.copy(REPO / "programs" / name, tmp_path / name)

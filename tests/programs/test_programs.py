@@ -11,8 +11,8 @@ from programs.motion_sequencer import MotionSequencer
 from programs.optimal_dispatcher import OptimalAssignment
 from programs.task_weighting import TaskWeighting, lowest_weight, task_weight
 from softplc.core.clock import SimClock
-from softplc.robotics.arrival import GOAL_TOLERANCE
 from softplc.core.program import Program, ProgramContext
+from softplc.robotics.arrival import GOAL_TOLERANCE
 
 
 def make(cls: type[Program], **params: object) -> Program:

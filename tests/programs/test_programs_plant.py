@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from programs.plant_simulator import MaterialHandlingPlant
+from softplc.app.runtime import Runtime
 from softplc.core.clock import SimClock
 from softplc.core.program import ProgramContext
-from softplc.app.runtime import Runtime
 
 PLANT = """
 version: 1

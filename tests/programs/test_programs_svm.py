@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import REPO
+
 from softplc.app.cli import main
-from softplc.core.clock import SimClock
 from softplc.app.runtime import Runtime
+from softplc.core.clock import SimClock
 from softplc.svm.dataset import (
     DatasetError,
     balance_rule,

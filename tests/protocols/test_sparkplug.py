@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from softplc.protocols.sparkplug import payloads, sparkplug_b_pb2 as pb
+from softplc.protocols.sparkplug import payloads
+from softplc.protocols.sparkplug import sparkplug_b_pb2 as pb
 from softplc.protocols.sparkplug.datatypes import SparkplugType, read_integer, wire_integer
 from softplc.protocols.sparkplug.metrics import MetricDefinition
 from softplc.protocols.sparkplug.sequence import BirthDeathSequence, MessageSequence

@@ -9,7 +9,15 @@ import pytest
 from softplc.clients.robot_agent.vda5050.factsheet import factsheet_of
 from softplc.clients.robot_agent.vda5050.vehicle import Vehicle
 from softplc.protocols.vda5050 import topics
-from softplc.protocols.vda5050.messages import FactsheetSummary, Headers, VehicleState, action, edge, instant_actions_of, node
+from softplc.protocols.vda5050.messages import (
+    FactsheetSummary,
+    Headers,
+    VehicleState,
+    action,
+    edge,
+    instant_actions_of,
+    node,
+)
 from softplc.protocols.vda5050.validation import MessageError, decode, problems
 from softplc.robotics.robots import Pose, parse_robots
 

@@ -6,11 +6,11 @@ import json
 import textwrap
 
 import pytest
-
 from conftest import REPO
+
 from softplc.app.cli import main
-from softplc.scenarios.spec import load_scenario
 from softplc.config.yamlsource import ConfigError
+from softplc.scenarios.spec import load_scenario
 
 
 def cli(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:

@@ -11,10 +11,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
 from conftest import REPO
-from softplc.config import PlantConfig
+
 from softplc.app.runtime import Adapter
+from softplc.config import PlantConfig
 from softplc.core.plant import Plant
 from softplc.scenarios.runner import RunResult, fleet_adapter, run_scenario
 from softplc.scenarios.spec import Scenario, load_scenario

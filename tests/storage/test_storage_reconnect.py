@@ -17,13 +17,13 @@ from pathlib import Path
 import pytest
 
 from softplc.app.adapters import build_adapters
-from softplc.storage.alarm_journal import TABLE, JournalSink
-from softplc.core.clock import RealClock
-from softplc.config import parse_config
-from softplc.core.roles import Role
 from softplc.app.runtime import Runtime
-from softplc.storage import BatchWriter, Database, StorageSettings
+from softplc.config import parse_config
+from softplc.core.clock import RealClock
+from softplc.core.roles import Role
 from softplc.core.tagdb import Origin
+from softplc.storage import BatchWriter, Database, StorageSettings
+from softplc.storage.alarm_journal import TABLE, JournalSink
 from tests.conftest import REPO
 from tests.storage.test_storage_unwritable import journal_entry
 

@@ -9,24 +9,23 @@ alarm journal alike; rows queued behind a poisoned one are written at the same f
 
 from __future__ import annotations
 
-from dataclasses import astuple
-from typing import Any
-
 import logging
+from dataclasses import astuple
 from pathlib import Path
+from typing import Any
 
 from asyncua import ua
 
-from softplc.storage.alarm_journal import TABLE, AlarmJournal, JournalEntry, JournalQuery, JournalSink
-from softplc.storage.audit.queries import AuditQuery, search
-from softplc.storage.audit.store import AuditSink
 from softplc.adapters.history.queries import HistoryReader
 from softplc.adapters.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.core.roles import Role
-from softplc.storage import BatchWriter, Database, StorageSettings
-from softplc.storage.unwritable import escape_text, escaped
 from softplc.core.tagdb import Origin, Rule, WriteEvent
 from softplc.core.tags import Quality
+from softplc.storage import BatchWriter, Database, StorageSettings
+from softplc.storage.alarm_journal import TABLE, AlarmJournal, JournalEntry, JournalQuery, JournalSink
+from softplc.storage.audit.queries import AuditQuery, search
+from softplc.storage.audit.store import AuditSink
+from softplc.storage.unwritable import escape_text, escaped
 from tests.audit_support import entries, opcua_client, running, wait_until
 
 T0 = 1_767_225_600.0

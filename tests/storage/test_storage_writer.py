@@ -8,8 +8,8 @@ from typing import Any
 
 import pytest
 
-from softplc.storage import BatchWriter, Database, StorageError, StorageSettings, parse_span, storage_problems
 from softplc.config.yamlsource import parse_yaml
+from softplc.storage import BatchWriter, Database, StorageError, StorageSettings, parse_span, storage_problems
 
 
 class Notes:

@@ -9,15 +9,14 @@ import time
 from pathlib import Path
 
 import pytest
-
-from softplc.app.cli import main
-from softplc.util.peers import PeerLog
-from softplc.util.plurals import counted, plural
-from softplc.core.roles import Role
-from softplc.security.users import UserStore
-
 from conftest import REPO
 from opcua_support import PASSWORDS, TEST_HASH_COST
+
+from softplc.app.cli import main
+from softplc.core.roles import Role
+from softplc.security.users import UserStore
+from softplc.util.peers import PeerLog
+from softplc.util.plurals import counted, plural
 from tests.app.test_cli import Process
 
 CORE = REPO / "tests" / "core_programs.py"

@@ -10,11 +10,20 @@ from __future__ import annotations
 
 from softplc.adapters.alarms.engine import Alarm, AlarmEngine
 from softplc.core.alarms import (
-    AlarmRefused, AlarmSnapshot, NothingToAcknowledge, NotShelved, ServiceUnchanged, Shelving, ShelveKind, ShelvingTimeOutOfRange, Transition,
-    Trigger, next_state,
+    AlarmRefused,
+    AlarmSnapshot,
+    NothingToAcknowledge,
+    NotShelved,
+    ServiceUnchanged,
+    ShelveKind,
+    Shelving,
+    ShelvingTimeOutOfRange,
+    Transition,
+    Trigger,
+    next_state,
 )
-from softplc.util.durations import format_duration
 from softplc.core.tagdb import Origin
+from softplc.util.durations import format_duration
 
 
 class AlarmActions:

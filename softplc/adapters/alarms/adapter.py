@@ -16,11 +16,11 @@ from typing import TYPE_CHECKING, Any
 from softplc.adapters.alarms.actions import AlarmActions
 from softplc.adapters.alarms.commands import register_alarm_commands
 from softplc.adapters.alarms.engine import AlarmEngine
-from softplc.storage.alarm_journal import AlarmJournal, JournalSink
 from softplc.adapters.alarms.settings import AlarmSettings
 from softplc.adapters.alarms.summary import SummaryTags
-from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.core.tagdb import Origin
+from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
+from softplc.storage.alarm_journal import AlarmJournal, JournalSink
 
 if TYPE_CHECKING:
     from softplc.core.plant import Plant

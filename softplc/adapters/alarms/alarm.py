@@ -10,8 +10,8 @@ from collections.abc import Callable
 
 from softplc.adapters.alarms.evaluation import Check, DiscreteCheck, IncreaseCheck, LimitCheck
 from softplc.adapters.alarms.messages import Template
-from softplc.core.alarms import AlarmSnapshot, AlarmState, Priority, Shelving, effective_state
 from softplc.adapters.alarms.settings import AlarmDefinition
+from softplc.core.alarms import AlarmSnapshot, AlarmState, Priority, Shelving, effective_state
 from softplc.core.tags import Tag
 
 

@@ -25,13 +25,13 @@ from typing import Any
 
 from softplc.adapters.alarms.actions import AlarmActions
 from softplc.adapters.alarms.engine import AlarmEngine
-from softplc.storage.alarm_journal import AlarmJournal, JournalQuery
 from softplc.core.alarms import AlarmState, Priority
 from softplc.core.clock import Clock
 from softplc.core.commands import CommandRefused, Commands, Permission
-from softplc.util.durations import parse_duration
-from softplc.storage.command_search import search_for_command
 from softplc.core.tagdb import Origin
+from softplc.storage.alarm_journal import AlarmJournal, JournalQuery
+from softplc.storage.command_search import search_for_command
+from softplc.util.durations import parse_duration
 from softplc.util.timestamps import format_shown, parse_utc
 
 STATE_FILTERS = ("all", "annunciated", "active", "unacknowledged", "shelved", "suppressed", "out_of_service", "normal")

@@ -21,13 +21,22 @@ from collections.abc import Callable, Iterable, Sequence
 from softplc.adapters.alarms.alarm import Alarm
 from softplc.adapters.alarms.evaluation import ON, IncreaseCheck, compile_condition, make_check
 from softplc.adapters.alarms.flood import FLOOD_ABOVE, FLOOD_ENDS_BELOW, WINDOW, FloodWatch
-from softplc.core.alarms import AlarmSnapshot, AlarmState, ShelveKind, Transition, Trigger, UnknownAlarm, next_state, released_state
 from softplc.adapters.alarms.settings import AlarmSettings
+from softplc.core.alarms import (
+    AlarmSnapshot,
+    AlarmState,
+    ShelveKind,
+    Transition,
+    Trigger,
+    UnknownAlarm,
+    next_state,
+    released_state,
+)
 from softplc.core.clock import Clock
 from softplc.core.events import Event
-from softplc.util.suggest import did_you_mean
 from softplc.core.tagdb import Origin, TagDatabase
 from softplc.core.tags import Tag
+from softplc.util.suggest import did_you_mean
 
 __all__ = ["Alarm", "AlarmEngine"]
 

@@ -26,18 +26,18 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from softplc.adapters.alarms.messages import FIELDS, MessageError, placeholders
-from softplc.core.alarms import Priority
 from softplc.adapters.alarms.schema import KINDS, LEVELS
 from softplc.config.plant import PlantConfig
-from softplc.core.datatypes import TypeMismatch
-from softplc.util.durations import parse_duration
-from softplc.core.expression import Condition, ExpressionError
 from softplc.config.schema import NAME_PATTERN, NAME_RULE
-from softplc.storage.settings import parse_span, storage_problems
-from softplc.util.suggest import did_you_mean
 from softplc.config.system_tags import system_tag_definitions
-from softplc.core.tags import TagDef
 from softplc.config.yamlsource import ConfigError, Location, Problem
+from softplc.core.alarms import Priority
+from softplc.core.datatypes import TypeMismatch
+from softplc.core.expression import Condition, ExpressionError
+from softplc.core.tags import TagDef
+from softplc.storage.settings import parse_span, storage_problems
+from softplc.util.durations import parse_duration
+from softplc.util.suggest import did_you_mean
 
 SECTION = "alarms"
 DEFAULT_SHELVE_MAX = 8 * 3600.0

@@ -19,15 +19,15 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from softplc.adapters.audit.commands import register_audit_commands
+from softplc.core.clock import Clock
+from softplc.core.commands import CommandCall, Commands
+from softplc.core.tagdb import TagDatabase, WriteEvent
+from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.storage.audit.entry import AuditEntry, CallRecord
 from softplc.storage.audit.queries import AuditQuery, search
 from softplc.storage.audit.settings import AuditSettings
 from softplc.storage.audit.store import SINK_NAME, AuditSink
-from softplc.core.clock import Clock
-from softplc.core.commands import CommandCall, Commands
 from softplc.util.realtime import shorten_switch_interval
-from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
-from softplc.core.tagdb import TagDatabase, WriteEvent
 
 if TYPE_CHECKING:
     from softplc.core.plant import Plant, ThreadGate

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from softplc.storage.audit.settings import AUDIT_SCHEMA, problems
 from softplc.config.schema import Section
+from softplc.storage.audit.settings import AUDIT_SCHEMA, problems
 
 SECTION = Section(path=("audit",), schema=AUDIT_SCHEMA, problems=problems)

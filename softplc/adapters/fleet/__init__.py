@@ -38,6 +38,7 @@ from softplc.util.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.adapters.fleet.adapter import FleetAdapter
+    from softplc.adapters.fleet.settings import FleetSettings
     from softplc.robotics.compat import (
         Compatibility,
         compatibility_matrix,
@@ -52,8 +53,16 @@ if TYPE_CHECKING:
     from softplc.robotics.gridmap import OccupancyGrid, load_map
     from softplc.robotics.loop import Sample
     from softplc.robotics.planner import PathPlanner, Plan
-    from softplc.robotics.robots import Hardware, Pose, RobotFile, RobotSpec, TaskFile, TaskSpec, load_robots, load_tasks
-    from softplc.adapters.fleet.settings import FleetSettings
+    from softplc.robotics.robots import (
+        Hardware,
+        Pose,
+        RobotFile,
+        RobotSpec,
+        TaskFile,
+        TaskSpec,
+        load_robots,
+        load_tasks,
+    )
 
 # Public names and their modules, imported on first use (PEP 562): `softplc --help` imports
 # softplc.adapters.fleet.cli and must not load numpy, scipy and the planner with it.

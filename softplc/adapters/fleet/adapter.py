@@ -15,7 +15,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from softplc.adapters.fleet.remote import PUBLISHED_TAGS, AgentRefusal, RemoteLink
+from softplc.adapters.fleet.settings import FleetSettings
 from softplc.config import PlantConfig
+from softplc.core.tagdb import Origin, TagDatabase
+from softplc.core.tags import Quality, Tag
 from softplc.robotics.controller import SpeedLimits
 from softplc.robotics.driver import Command, DriverSettings, Report, RobotDriver
 from softplc.robotics.floor import Floor
@@ -24,12 +28,8 @@ from softplc.robotics.loop import ControlLoop, LoopStats, Sample
 from softplc.robotics.peers import PEER_TAGS, PeerView
 from softplc.robotics.planner import PathPlanner
 from softplc.robotics.planning import ClockPlanning, Planning, ProcessPlanning
-from softplc.adapters.fleet.remote import PUBLISHED_TAGS, AgentRefusal, RemoteLink
 from softplc.robotics.robots import DriverKind, Pose, RobotFile, RobotSpec, load_robots
-from softplc.adapters.fleet.settings import FleetSettings
 from softplc.util.plurals import plural
-from softplc.core.tagdb import Origin, TagDatabase
-from softplc.core.tags import Quality, Tag
 from softplc.util.tasks import cancel_and_wait
 
 if TYPE_CHECKING:

@@ -14,10 +14,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from softplc.robotics.protocol import Answer, Registration, decode_report
-from softplc.robotics.robots import RobotSpec
 from softplc.core.tagdb import Origin, TagDatabase
 from softplc.core.tags import Quality
+from softplc.robotics.protocol import Answer, Registration, decode_report
+from softplc.robotics.robots import RobotSpec
 
 log = logging.getLogger(__name__)
 

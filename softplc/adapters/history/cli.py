@@ -61,9 +61,9 @@ def _common(parser: argparse.ArgumentParser) -> None:
 
 
 def _reader(args: argparse.Namespace) -> Any:
-    from softplc.config import load_config
     from softplc.adapters.history.queries import HistoryReader
     from softplc.adapters.history.settings import HistorySettings
+    from softplc.config import load_config
     from softplc.storage import Database
 
     config = load_config(args.config)

@@ -19,11 +19,18 @@ import math
 from collections.abc import Callable, Collection, Mapping
 from typing import TYPE_CHECKING, Any
 
-from softplc.core.commands import CommandRefused, Permission
 from softplc.adapters.history.aggregates import Aggregate, AggregateConfig
 from softplc.adapters.history.queries import DEFAULT_PLOT_POINTS, HistoryReader, UnknownTag
-from softplc.adapters.history.reads import MAX_VALUES, InvalidContinuation, as_dict, read_at_time, read_processed, read_raw
+from softplc.adapters.history.reads import (
+    MAX_VALUES,
+    InvalidContinuation,
+    as_dict,
+    read_at_time,
+    read_processed,
+    read_raw,
+)
 from softplc.adapters.history.store import TagInfo
+from softplc.core.commands import CommandRefused, Permission
 
 if TYPE_CHECKING:
     from softplc.core.plant import Plant

@@ -16,11 +16,20 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 from softplc.adapters.history import aggregates
-from softplc.adapters.history.aggregates import DEFAULT_CONFIG, Aggregate, AggregateConfig, Flags, Result, Sample, decimate, intervals
+from softplc.adapters.history.aggregates import (
+    DEFAULT_CONFIG,
+    Aggregate,
+    AggregateConfig,
+    Flags,
+    Result,
+    Sample,
+    decimate,
+    intervals,
+)
 from softplc.adapters.history.bounds import Series, interpolated_bound, simple_bound
 from softplc.adapters.history.store import LEVELS, QUALITIES, TagInfo
-from softplc.storage import Database, StorageError
 from softplc.core.tags import Quality
+from softplc.storage import Database, StorageError
 
 DEFAULT_PLOT_POINTS = 2000
 

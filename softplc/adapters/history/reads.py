@@ -21,7 +21,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from softplc.adapters.history.aggregates import AggregateConfig, Aggregate, Flags, Result, Sample, interval_count
+from softplc.adapters.history.aggregates import Aggregate, AggregateConfig, Flags, Result, Sample, interval_count
 from softplc.adapters.history.queries import Continuation, HistoryReader
 from softplc.core.tags import Quality
 

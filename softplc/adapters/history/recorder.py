@@ -17,17 +17,17 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
+from softplc.adapters.history.columns import QUALITY_CODES
 from softplc.adapters.history.commands import register_history_commands
 from softplc.adapters.history.queries import HistoryReader
 from softplc.adapters.history.settings import HistorySettings, TagPolicy
-from softplc.adapters.history.columns import QUALITY_CODES
 from softplc.adapters.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.adapters.history.swinging_door import SwingingDoor
-from softplc.util.plurals import plural
-from softplc.util.realtime import shorten_switch_interval
+from softplc.core.tags import Quality, Tag
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.storage.process import ProcessWriter
-from softplc.core.tags import Quality, Tag
+from softplc.util.plurals import plural
+from softplc.util.realtime import shorten_switch_interval
 
 if TYPE_CHECKING:
     from softplc.core.plant import Plant

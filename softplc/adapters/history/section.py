@@ -21,8 +21,8 @@ from softplc.config.schema import Section
 from softplc.config.system_tags import runtime_tag_definitions
 
 if TYPE_CHECKING:
-    from softplc.config.plant import PlantConfig
     from softplc.adapters.history.settings import Rule
+    from softplc.config.plant import PlantConfig
     from softplc.config.yamlsource import Problem
 
 TAG_KEY: dict[str, Any] = {

@@ -16,8 +16,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from softplc.storage.settings import STORAGE_PROPERTIES, StorageSettings, parse_span, partitioned_spans, span_problems, storage_problems
 from softplc.config.yamlsource import Problem
+from softplc.storage.settings import (
+    STORAGE_PROPERTIES,
+    StorageSettings,
+    parse_span,
+    partitioned_spans,
+    span_problems,
+    storage_problems,
+)
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

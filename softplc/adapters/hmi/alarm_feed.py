@@ -28,14 +28,14 @@ import time
 from collections import deque
 from typing import TYPE_CHECKING, Any
 
-from softplc.core.events import Event, EventBus
 from softplc.adapters.hmi.pacing import Pacer
 from softplc.adapters.hmi.wire import dumps
+from softplc.core.events import Event, EventBus
 from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:
-    from softplc.core.commands import Commands
     from softplc.adapters.hmi.fanout import Client
+    from softplc.core.commands import Commands
 
 log = logging.getLogger(__name__)
 

@@ -31,16 +31,15 @@ from softplc import __version__
 from softplc.adapters.hmi.fanout import wire_value
 from softplc.adapters.hmi.sessions import Identity
 from softplc.adapters.hmi.untrusted import BadJson, loads, shown, shown_name
-from softplc.util.peers import peer_host
 from softplc.core.roles import Role
-from softplc.util.suggest import did_you_mean
 from softplc.core.tagdb import Origin, Rule, TagDatabase
 from softplc.core.tags import Tag
+from softplc.util.peers import peer_host
+from softplc.util.suggest import did_you_mean
 
 Pause = Callable[[], Awaitable[None]]
 
 if TYPE_CHECKING:
-    from softplc.config.plant import PlantConfig
     from softplc.adapters.hmi.live import Hub
     from softplc.adapters.hmi.plant import PlantModel
     from softplc.adapters.hmi.security import OriginPolicy
@@ -49,6 +48,7 @@ if TYPE_CHECKING:
     from softplc.adapters.hmi.shell import Shell
     from softplc.adapters.hmi.views import View
     from softplc.adapters.hmi.writelog import WriteLog
+    from softplc.config.plant import PlantConfig
     from softplc.core.plant import Plant
 
 

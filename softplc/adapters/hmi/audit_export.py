@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from softplc.core.commands import CommandRefused
-from softplc.util.peers import peer_host
 from softplc.core.tagdb import Origin
+from softplc.util.peers import peer_host
 
 if TYPE_CHECKING:
     from softplc.adapters.hmi.api import HmiServer

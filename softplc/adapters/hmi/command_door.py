@@ -22,13 +22,13 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
-from softplc.core.commands import CommandRefused, Permission, UnknownCommand
 from softplc.adapters.hmi.untrusted import BadJson, loads, shown_name
 from softplc.adapters.hmi.wire import json_response
-from softplc.util.peers import PeerLog, peer_host
+from softplc.core.commands import CommandRefused, Permission, UnknownCommand
 from softplc.core.roles import Role
-from softplc.util.suggest import did_you_mean
 from softplc.core.tagdb import Origin
+from softplc.util.peers import PeerLog, peer_host
+from softplc.util.suggest import did_you_mean
 
 if TYPE_CHECKING:
     from softplc.adapters.hmi.api import HmiServer

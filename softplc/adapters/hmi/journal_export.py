@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from softplc.core.commands import CommandRefused
-from softplc.util.peers import peer_host
 from softplc.core.tagdb import Origin
+from softplc.util.peers import peer_host
 
 if TYPE_CHECKING:
     from softplc.adapters.hmi.api import HmiServer
@@ -71,7 +71,10 @@ def _time_or_text(value: str) -> Any:
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
-    from softplc.storage.alarm_journal import entries_from_dicts, write_csv  # the alarms' own format; loaded when asked for
+    from softplc.storage.alarm_journal import (  # the alarms' own format; loaded when asked for
+        entries_from_dicts,
+        write_csv,
+    )
 
     stream = io.StringIO()
     write_csv(entries_from_dicts(rows), stream)

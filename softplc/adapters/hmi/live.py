@@ -35,16 +35,16 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSMsgType, web
 
-from softplc.core.clock import Clock
-from softplc.adapters.hmi.expressions import ExpressionTable
 from softplc.adapters.hmi.delivery import DeliveryRecord
+from softplc.adapters.hmi.expressions import ExpressionTable
 from softplc.adapters.hmi.fanout import Client, Encoder, Frame, Group
 from softplc.adapters.hmi.pacing import Pacer
 from softplc.adapters.hmi.sessions import Identity
 from softplc.adapters.hmi.untrusted import BadJson, clip, loads, shown
-from softplc.util.peers import PeerLog, peer_host
+from softplc.core.clock import Clock
 from softplc.core.tagdb import TagDatabase
 from softplc.core.tags import Tag
+from softplc.util.peers import PeerLog, peer_host
 
 if TYPE_CHECKING:
     from softplc.adapters.hmi.alarm_feed import AlarmFeed

@@ -22,8 +22,8 @@ from aiohttp import web
 from softplc.adapters.hmi.metrics_settings import MetricsSettings
 from softplc.core.commands import CommandRefused
 from softplc.core.origin import Origin
-from softplc.core.roles import Role
 from softplc.core.plant import AdapterError, Plant
+from softplc.core.roles import Role
 from softplc.util.peers import PeerLog
 
 log = logging.getLogger(__name__)

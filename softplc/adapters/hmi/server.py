@@ -20,12 +20,12 @@ from typing import TYPE_CHECKING, Any
 from aiohttp import web
 
 from softplc.adapters.hmi.alarm_feed import AlarmFeed
-from softplc.adapters.hmi.browser import open_later
 from softplc.adapters.hmi.api import Api
-from softplc.adapters.hmi.command_door import CommandDoor
-from softplc.adapters.hmi.journal_export import JournalExport
 from softplc.adapters.hmi.assets import AssetsNotFound, find_assets
+from softplc.adapters.hmi.browser import open_later
+from softplc.adapters.hmi.command_door import CommandDoor
 from softplc.adapters.hmi.expressions import ExpressionTable
+from softplc.adapters.hmi.journal_export import JournalExport
 from softplc.adapters.hmi.live import Hub
 from softplc.adapters.hmi.metrics_route import MetricsRoute
 from softplc.adapters.hmi.metrics_settings import MetricsSettings
@@ -40,11 +40,11 @@ from softplc.adapters.hmi.supervisory import add_supervisory
 from softplc.adapters.hmi.untrusted import clip
 from softplc.adapters.hmi.views import View, load_views
 from softplc.adapters.hmi.writelog import WriteLog
+from softplc.config.yamlsource import ConfigError
 from softplc.security.logins import PasswordLogins
+from softplc.security.users import UserStore
 from softplc.util.peers import PeerLog, peer_host
 from softplc.util.plurals import plural
-from softplc.security.users import UserStore
-from softplc.config.yamlsource import ConfigError
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

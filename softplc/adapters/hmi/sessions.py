@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 from aiohttp import web
 
-from softplc.security.logins import PasswordLogins
 from softplc.core.roles import Role
+from softplc.security.logins import PasswordLogins
 from softplc.security.users import UserStore
 
 CSRF_HEADER = "X-CSRF-Token"

@@ -13,10 +13,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from softplc.util.addresses import is_host
-from softplc.util.durations import parse_duration
 from softplc.adapters.hmi.metrics_settings import METRICS_SCHEMA, metrics_problems
 from softplc.core.roles import Role
+from softplc.util.addresses import is_host
+from softplc.util.durations import parse_duration
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

@@ -16,8 +16,8 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from softplc.core.commands import Commands
 from softplc.adapters.hmi.shell import Page, Shell
+from softplc.core.commands import Commands
 
 log = logging.getLogger(__name__)
 

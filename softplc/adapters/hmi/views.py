@@ -25,11 +25,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from softplc.adapters.hmi.svg import SvgError, svg_ids
 from softplc.core.datatypes import TypeMismatch
 from softplc.core.expression import Condition, ExpressionError
-from softplc.adapters.hmi.svg import SvgError, svg_ids
-from softplc.util.suggest import did_you_mean
 from softplc.core.tags import TagDef
+from softplc.util.suggest import did_you_mean
 
 if TYPE_CHECKING:
     from softplc.config.plant import PlantConfig

@@ -15,7 +15,14 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from softplc.adapters.links.settings import (
-    MAX_BITS, MAX_REGISTERS, PROTOCOLS, REGISTER_TYPE_NAMES, SECTION, SECURITY_MODES, TAG_KEY, read_links,
+    MAX_BITS,
+    MAX_REGISTERS,
+    PROTOCOLS,
+    REGISTER_TYPE_NAMES,
+    SECTION,
+    SECURITY_MODES,
+    TAG_KEY,
+    read_links,
 )
 from softplc.config.schema import DURATION, NAME_PATTERN, Section
 from softplc.core.datatypes import DataType

@@ -26,13 +26,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from softplc.config.plant import SYSTEM_PREFIX, PlantConfig
-from softplc.core.datatypes import DataType
-from softplc.protocols.modbus_codec import REGISTER_TYPES, RegisterCodec, register_words
 from softplc.adapters.modbus.settings import ModbusSettings
+from softplc.config.plant import SYSTEM_PREFIX, PlantConfig
 from softplc.config.system_tags import runtime_tag_definitions
-from softplc.core.tags import Access, TagDef
 from softplc.config.yamlsource import ConfigError, Location, Problem, SourceMap
+from softplc.core.datatypes import DataType
+from softplc.core.tags import Access, TagDef
+from softplc.protocols.modbus_codec import REGISTER_TYPES, RegisterCodec, register_words
 
 ADDRESS_SPACE = 65536
 log = logging.getLogger(__name__)

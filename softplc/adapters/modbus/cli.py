@@ -8,9 +8,9 @@ import json
 import sys
 from typing import Any
 
-from softplc.config import load_config
 from softplc.adapters.modbus.address_map import AddressMap, Mapping, build_address_map
 from softplc.adapters.modbus.settings import ModbusSettings
+from softplc.config import load_config
 
 COLUMNS = ("tag", "table", "address", "number", "reference", "type", "encoding", "words", "scale", "word_order", "access", "unit")
 

@@ -27,20 +27,20 @@ from pymodbus.constants import ExcCodes
 from pymodbus.simulator import DataType as SimType
 from pymodbus.simulator import SimData, SimDevice
 
-from softplc.config import PlantConfig
-from softplc.adapters.modbus.address_map import AddressMap, Table, build_address_map
-from softplc.protocols.modbus_codec import CodecError
 from softplc.adapters.modbus import lognoise
+from softplc.adapters.modbus.address_map import AddressMap, Table, build_address_map
 from softplc.adapters.modbus.connections import ConnectionCounts, PlcTcpServer, request_peer
 from softplc.adapters.modbus.functions import RequestDecoder
 from softplc.adapters.modbus.identification import device_objects, identification_request
 from softplc.adapters.modbus.image import RegisterImage
 from softplc.adapters.modbus.requests import LIMITS, RequestGuard, guarded_requests
 from softplc.adapters.modbus.settings import ModbusSettings, settings_problems
-from softplc.util.plurals import plural
+from softplc.config import PlantConfig
+from softplc.config.yamlsource import ConfigError
 from softplc.core.plant import AdapterError, Plant
 from softplc.core.tagdb import Origin, Rule, TagDatabase
-from softplc.config.yamlsource import ConfigError
+from softplc.protocols.modbus_codec import CodecError
+from softplc.util.plurals import plural
 
 log = logging.getLogger(__name__)
 

@@ -6,13 +6,13 @@ from softplc.util.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from softplc.adapters.opcua.address_space import tag_node_id
-    from softplc.protocols.opcua_client import ClientCertificate, ensure_client_certificate, make_client
-    from softplc.core.roles import Role
-    from softplc.security.certificates import Pki
     from softplc.adapters.opcua.server import OpcUaServer
     from softplc.adapters.opcua.settings import DEFAULT_NAMESPACE, OpcUaSettings
-    from softplc.security.users import UserStore
+    from softplc.core.roles import Role
+    from softplc.protocols.opcua_client import ClientCertificate, ensure_client_certificate, make_client
     from softplc.protocols.opcua_variants import variant_for
+    from softplc.security.certificates import Pki
+    from softplc.security.users import UserStore
 
 # Public names and their modules, imported on first use (PEP 562): `softplc --help` imports
 # softplc.adapters.opcua.cli and must not load asyncua with it.

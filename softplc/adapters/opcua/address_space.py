@@ -22,14 +22,14 @@ import math
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 from datetime import datetime, timezone
+from typing import Any
 
 from asyncua import ua
 from asyncua.server.address_space import AddressSpace, AttributeValue, NodeData
 
-from softplc.core.tags import Access, Tag, TagDef
 from softplc.adapters.opcua.units import eu_information
+from softplc.core.tags import Access, Tag, TagDef
 from softplc.protocols.opcua_variants import DATA_TYPE_IDS, data_value
 
 PLANT_FOLDER = "Plant"

@@ -8,13 +8,13 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from softplc.util.plurals import plural
-from softplc.core.roles import ROLE_NAMES
 from softplc.config.yamlsource import load_yaml
+from softplc.core.roles import ROLE_NAMES
+from softplc.util.plurals import plural
 
 if TYPE_CHECKING:  # the rest of softplc.adapters.opcua needs asyncua: each command imports what it uses
-    from softplc.security.certificates import Pki
     from softplc.adapters.opcua.settings import OpcUaSettings
+    from softplc.security.certificates import Pki
     from softplc.security.users import UserStore
 
 EXIT_OK, EXIT_FAILURE = 0, 1
@@ -119,8 +119,8 @@ def _store(args: argparse.Namespace) -> UserStore:
 
 
 def cmd_certs(args: argparse.Namespace) -> int:
-    from softplc.util.console import print_table
     from softplc.security.certificates import describe_file
+    from softplc.util.console import print_table
 
     pki = _pki(args)
     own = describe_file(pki.certificate_path) if pki.certificate_path.exists() else None

@@ -25,10 +25,10 @@ from typing import TYPE_CHECKING, Any
 from asyncua import Server, ua
 from asyncua.server.address_space import AttributeValue
 
-from softplc.core.commands import CommandRefused, Commands
-from softplc.protocols.opcua_names import COMMANDS_OBJECT
 from softplc.adapters.opcua.roles import role_of
+from softplc.core.commands import CommandRefused, Commands
 from softplc.core.tagdb import Origin
+from softplc.protocols.opcua_names import COMMANDS_OBJECT
 
 if TYPE_CHECKING:
     from asyncua.server.internal_server import InternalServer

@@ -39,8 +39,8 @@ from typing import Any
 from asyncua import ua
 from asyncua.common import event_objects
 
-from softplc.core.events import Event
 from softplc.adapters.opcua.condition_events import fill, fix_types, note
+from softplc.core.events import Event
 
 log = logging.getLogger(__name__)
 

@@ -30,11 +30,20 @@ from typing import TYPE_CHECKING, Any
 from asyncua import Server, ua
 from asyncua.common import event_objects
 
-from softplc.core.alarms import NothingToAcknowledge, NotShelved, ServiceUnchanged, ShelvingTimeOutOfRange, UnknownAlarm
-from softplc.core.events import Event
 from softplc.adapters.opcua.commands import call_command, current_origin, current_session_id, install_caller_context
 from softplc.adapters.opcua.condition_delivery import ConditionDelivery
-from softplc.adapters.opcua.condition_events import EventTypeId, attribute_value, fill, fix_types, link, make_node, new_event, parent_folder
+from softplc.adapters.opcua.condition_events import (
+    EventTypeId,
+    attribute_value,
+    fill,
+    fix_types,
+    link,
+    make_node,
+    new_event,
+    parent_folder,
+)
+from softplc.core.alarms import NothingToAcknowledge, NotShelved, ServiceUnchanged, ShelvingTimeOutOfRange, UnknownAlarm
+from softplc.core.events import Event
 from softplc.core.tagdb import Origin
 
 if TYPE_CHECKING:

@@ -60,9 +60,9 @@ from asyncua import ua
 from asyncua.common.utils import ServiceError
 from asyncua.server.history import HistoryManager
 
-from softplc.protocols.opcua_variants import STATUS_CODES, VARIANT_TYPES
 from softplc.core.tagdb import TagDatabase
 from softplc.core.tags import Quality
+from softplc.protocols.opcua_variants import STATUS_CODES, VARIANT_TYPES
 
 log = logging.getLogger(__name__)
 

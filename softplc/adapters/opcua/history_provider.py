@@ -17,8 +17,8 @@ from typing import Any
 
 from asyncua import ua
 
-from softplc.core.commands import CommandRefused, Commands
 from softplc.adapters.opcua.history import HistoryPage, HistoryUnavailable, Sample
+from softplc.core.commands import CommandRefused, Commands
 from softplc.core.tagdb import Origin
 from softplc.core.tags import Quality
 

@@ -35,11 +35,10 @@ from typing import Any
 from asyncua import ua
 from asyncua.common.utils import Buffer, ServiceError
 from asyncua.crypto.security_policies import SecurityPolicyNone
+from asyncua.server.internal_session import SessionState
 from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua.ua_binary import struct_from_binary
 from cryptography import x509
-
-from asyncua.server.internal_session import SessionState
 
 from softplc.adapters.opcua.browsing import ContinuationPoints
 from softplc.adapters.opcua.roles import SessionUser

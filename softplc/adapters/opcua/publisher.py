@@ -28,9 +28,9 @@ from asyncua import ua
 from asyncua.server.address_space import AddressSpace
 
 from softplc.adapters.opcua.scheduling import ScanGuard
-from softplc.protocols.opcua_variants import VARIANT_TYPES, tag_data_value
 from softplc.core.tagdb import TagDatabase
 from softplc.core.tags import Tag
+from softplc.protocols.opcua_variants import VARIANT_TYPES, tag_data_value
 
 log = logging.getLogger(__name__)
 

@@ -40,18 +40,18 @@ from softplc.adapters.opcua.history_capabilities import advertise_history
 from softplc.adapters.opcua.history_provider import CommandHistory  # the historian's commands, when it runs
 from softplc.adapters.opcua.publisher import Publisher
 from softplc.adapters.opcua.redundancy import ServerRedundancy, redundancy_info  # a redundant pair's ServiceLevel
-from softplc.adapters.opcua.standard_nodes import init_server
 from softplc.adapters.opcua.roles import RolePermissions
 from softplc.adapters.opcua.scheduling import ScanGuard
-from softplc.security.certificates import ClientCertificateValidator, Pki, SecuredChannels
 from softplc.adapters.opcua.server_status import ServerStatusClock
 from softplc.adapters.opcua.settings import POLICIES, POLICY_NONE, POLICY_TEXT, OpcUaSettings
+from softplc.adapters.opcua.standard_nodes import init_server
 from softplc.adapters.opcua.transport import ConnectionLimits, GuardedServer
 from softplc.adapters.opcua.user_manager import SoftplcUserManager
-from softplc.util.plurals import plural
-from softplc.security.users import UserStore
 from softplc.adapters.opcua.writes import MAX_NODES_PER_READ, MAX_NODES_PER_WRITE, TagAttributeService
 from softplc.config.yamlsource import ConfigError
+from softplc.security.certificates import ClientCertificateValidator, Pki, SecuredChannels
+from softplc.security.users import UserStore
+from softplc.util.plurals import plural
 
 if TYPE_CHECKING:
     from softplc.core.plant import Plant

@@ -46,7 +46,14 @@ from asyncua.server.internal_subscription import InternalSubscription
 from asyncua.server.monitored_item_service import MonitoredItemData, MonitoredItemService
 from asyncua.server.subscription_service import SubscriptionService
 
-from softplc.adapters.opcua.monitoring import NO_FILTER, ChangeFilter, FilterRefused, change_filter, revise_event_queue_size, revise_queue_size
+from softplc.adapters.opcua.monitoring import (
+    NO_FILTER,
+    ChangeFilter,
+    FilterRefused,
+    change_filter,
+    revise_event_queue_size,
+    revise_queue_size,
+)
 from softplc.adapters.opcua.scheduling import ScanGuard
 from softplc.protocols.opcua_variants import TagDataValue
 

@@ -41,13 +41,17 @@ from asyncua.crypto.security_policies import SecurityPolicyNone
 from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
 from asyncua.ua.ua_binary import header_from_binary, uatcp_to_binary
 
-from softplc.util.peers import PeerLog, peer_host
 from softplc.adapters.opcua.methods import CheckedMethodService
 from softplc.adapters.opcua.processor import DiscoveryOnlyNone, GuardedProcessor, PolicyRefused
 from softplc.adapters.opcua.scheduling import ScanGuard
-from softplc.security.certificates import SecuredChannels
-from softplc.adapters.opcua.settings import DEFAULT_MAX_CHUNK_COUNT, DEFAULT_MAX_CONNECTIONS_PER_PEER, DEFAULT_MAX_MESSAGE_SIZE
+from softplc.adapters.opcua.settings import (
+    DEFAULT_MAX_CHUNK_COUNT,
+    DEFAULT_MAX_CONNECTIONS_PER_PEER,
+    DEFAULT_MAX_MESSAGE_SIZE,
+)
 from softplc.adapters.opcua.subscriptions import GuardedSubscriptionService
+from softplc.security.certificates import SecuredChannels
+from softplc.util.peers import PeerLog, peer_host
 
 log = logging.getLogger(__name__)
 

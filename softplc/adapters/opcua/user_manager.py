@@ -8,9 +8,9 @@ from typing import Any
 from asyncua.crypto.permission_rules import UserRole
 from asyncua.server.user_managers import UserManager
 
-from softplc.security.logins import PasswordLogins
 from softplc.adapters.opcua.roles import SessionUser
 from softplc.core.roles import Role
+from softplc.security.logins import PasswordLogins
 from softplc.security.users import UserStore
 
 log = logging.getLogger(__name__)

@@ -52,9 +52,9 @@ from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.address_space import AddressSpace, AttributeService
 
 from softplc.adapters.opcua.roles import role_of
-from softplc.protocols.opcua_variants import WriteStatus, value_from_variant
 from softplc.core.roles import Role
 from softplc.core.tagdb import Origin, Rule, TagDatabase, WriteRejected
+from softplc.protocols.opcua_variants import WriteStatus, value_from_variant
 
 log = logging.getLogger(__name__)
 

@@ -18,7 +18,6 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from softplc.adapters.redundancy import section as tags
-from softplc.security.pair_certificates import fingerprint, link_context
 from softplc.adapters.redundancy.coordinator import Coordinator, Holder
 from softplc.adapters.redundancy.election import live
 from softplc.adapters.redundancy.settings import RedundancySettings
@@ -26,6 +25,7 @@ from softplc.adapters.redundancy.sync_server import SyncServer
 from softplc.core.commands import Permission
 from softplc.core.plant import AdapterError
 from softplc.core.plant_role import PlantRole, RoleTerm
+from softplc.security.pair_certificates import fingerprint, link_context
 from softplc.util.tasks import cancel_and_wait
 
 if TYPE_CHECKING:

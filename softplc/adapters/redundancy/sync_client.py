@@ -14,10 +14,10 @@ import os
 import ssl
 from typing import Any
 
-from softplc.security.pair_certificates import fingerprint_of_der
 from softplc.adapters.redundancy.link import VERSION, LinkRefused, check_data, check_welcome, encode, read_message
 from softplc.adapters.redundancy.sync_server import HANDSHAKE_TIMEOUT
 from softplc.core.plant import StateRefused
+from softplc.security.pair_certificates import fingerprint_of_der
 
 log = logging.getLogger(__name__)
 

@@ -19,8 +19,8 @@ import ssl
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from softplc.security.pair_certificates import fingerprint_of_der
 from softplc.adapters.redundancy.link import VERSION, LinkRefused, check_hello, encode, expect, read_message
+from softplc.security.pair_certificates import fingerprint_of_der
 
 if TYPE_CHECKING:
     from softplc.core.plant import Plant, TaskView

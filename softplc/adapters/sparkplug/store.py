@@ -17,9 +17,9 @@ from __future__ import annotations
 import logging
 import struct
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Iterator
 from typing import BinaryIO
 
 log = logging.getLogger(__name__)

@@ -244,8 +244,8 @@ def _run(args: argparse.Namespace, calls: list[tuple[str, dict[str, Any]]], jour
 
 
 async def _session(login: Login, calls: list[tuple[str, dict[str, Any]]], journal: Journal | None) -> tuple[int, list[Any]]:
-    from softplc.clients.session import NotSoftplc, open_live_session
     from softplc.clients.door_client import CommandError, call_command, call_pages
+    from softplc.clients.session import NotSoftplc, open_live_session
 
     results: list[Any] = []
     status = EXIT_OK

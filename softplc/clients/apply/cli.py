@@ -85,8 +85,8 @@ def cmd_apply(args: argparse.Namespace) -> int:
 
 async def apply(login: Login, *, check: bool) -> Any:
     """Call programs.apply on the runtime `login` reaches; its result, or ApplyError with the status."""
-    from softplc.clients.session import NotSoftplc, open_live_session
     from softplc.clients.door_client import CommandError, call_command
+    from softplc.clients.session import NotSoftplc, open_live_session
 
     try:
         async with open_live_session(login) as live:

@@ -21,9 +21,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from softplc.core.commands import CommandRefused
 from softplc.clients.endpoints import endpoint_url
 from softplc.clients.login import LoginError, add_login_arguments, login_from_args
+from softplc.core.commands import CommandRefused
 from softplc.util.plurals import plural
 from softplc.util.timestamps import TIME_HELP, format_shown, parse_time
 
@@ -123,10 +123,10 @@ def _time(text: str | None, option: str, now: float) -> float | None:
 
 
 def _local(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
-    from softplc.storage.audit.queries import MAX_ROWS, AuditQuery, query_from_arguments, search
-    from softplc.storage.audit.settings import AuditSettings
     from softplc.config import load_config
     from softplc.storage import Database
+    from softplc.storage.audit.queries import MAX_ROWS, AuditQuery, query_from_arguments, search
+    from softplc.storage.audit.settings import AuditSettings
     from softplc.storage.database import driver_errors
 
     config = load_config(args.config)  # a ConfigError is reported by the CLI (exit 2)
@@ -179,8 +179,8 @@ def _remote(args: argparse.Namespace, wanted: float) -> list[dict[str, Any]]:
         raise _Failure(str(error), error.exit_status) from None
 
     async def session() -> list[dict[str, Any]]:
-        from softplc.clients.session import NotSoftplc, open_live_session
         from softplc.clients.door_client import CommandError, call_pages
+        from softplc.clients.session import NotSoftplc, open_live_session
 
         try:
             async with open_live_session(login) as live:

@@ -35,7 +35,9 @@ from typing import Any
 from asyncua import Client, ua
 
 from softplc import __version__
+from softplc.clients.login import REFUSALS
 from softplc.core.clock import Clock, RealClock
+from softplc.protocols.opcua_names import DEFAULT_NAMESPACE
 from softplc.robotics.controller import SpeedLimits
 from softplc.robotics.driver import Command, DriverSettings, Report, RobotDriver
 from softplc.robotics.floor import Floor
@@ -43,8 +45,6 @@ from softplc.robotics.loop import ControlLoop
 from softplc.robotics.peers import PEER_TAGS, PeerView
 from softplc.robotics.protocol import Answer, Registration, encode_report
 from softplc.robotics.robots import RobotFile, unknown_id_message
-from softplc.clients.login import REFUSALS
-from softplc.protocols.opcua_names import DEFAULT_NAMESPACE
 
 log = logging.getLogger(__name__)
 

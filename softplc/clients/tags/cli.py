@@ -250,8 +250,8 @@ async def _the_active(login: Any, timeout: float) -> LiveSession:
 
 def cmd_forces(args: argparse.Namespace) -> int:
     async def body(live: LiveSession) -> int:
-        from softplc.clients.tags.forces import FORCES_HEADER, UNKNOWN_BY, list_forces
         from softplc.clients.door_client import CommandError
+        from softplc.clients.tags.forces import FORCES_HEADER, UNKNOWN_BY, list_forces
         from softplc.clients.tags.table import format_time, format_value, table_lines
 
         try:

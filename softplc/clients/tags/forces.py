@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import Any
 
-from softplc.clients.session import LiveSession, Reading
 from softplc.clients.door_client import CommandError, call_command
+from softplc.clients.session import LiveSession, Reading
 
 READ_CHUNK = 5000  # tags per Read request (the server takes up to 20,000)
 FORCES_HEADER = ("tag", "value", "since (UTC)", "by")

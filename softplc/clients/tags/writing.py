@@ -14,12 +14,12 @@ from typing import Any
 
 from asyncua import ua
 
-from softplc.core.datatypes import TypeMismatch
 from softplc.clients.session import LiveSession, TagInfo
 from softplc.clients.tags.table import format_value
-from softplc.protocols.opcua_variants import variant_for
+from softplc.core.datatypes import TypeMismatch
 from softplc.core.roles import Role
 from softplc.core.tagdb import Rule, TagDatabase, WriteRejected
+from softplc.protocols.opcua_variants import variant_for
 
 _CODE_RULES = {
     ua.StatusCodes.BadNodeIdUnknown: Rule.UNKNOWN_TAG,

@@ -21,23 +21,23 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from softplc.core.clock import Clock, wait_for
-from softplc.core.plant_role import RoleHolder
-from softplc.core.commands import CommandRefused, Commands, Permission
-from softplc.engine.online_change.fresh import FreshModules, module_file, source_digest
 from softplc.config.loader import load_config
 from softplc.config.plant import PlantConfig
 from softplc.config.programs import raised_at, split_reference
+from softplc.config.yamlsource import ConfigError
+from softplc.core.clock import Clock, wait_for
+from softplc.core.commands import CommandRefused, Commands, Permission
 from softplc.core.function_blocks import warm_start
-from softplc.engine.online_change.diff import ConfigDiff, diff_configs
 from softplc.core.origin import Origin
-from softplc.util.plurals import plural
+from softplc.core.plant_role import RoleHolder
 from softplc.core.program import Program, ProgramContext
+from softplc.engine.online_change.diff import ConfigDiff, diff_configs
+from softplc.engine.online_change.fresh import FreshModules, module_file, source_digest
 from softplc.engine.program_instance import ProgramInstance, ProgramState
-from softplc.util.realtime import shorten_switch_interval
 from softplc.engine.scan import ScanEngine, Task
 from softplc.engine.scan_gate import ScanGate
-from softplc.config.yamlsource import ConfigError
+from softplc.util.plurals import plural
+from softplc.util.realtime import shorten_switch_interval
 
 log = logging.getLogger(__name__)
 

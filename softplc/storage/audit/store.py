@@ -19,8 +19,8 @@ from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager
 from typing import Any
 
-from softplc.storage.audit.entry import row_of
 from softplc.storage import Database
+from softplc.storage.audit.entry import row_of
 from softplc.storage.partitions import PartitionCatalogue, insert_rows
 
 SINK_NAME = "audit"

@@ -16,11 +16,11 @@ from typing import Any
 
 from asyncua import Client, ua
 
-from softplc.app.adapters import build_adapters
-from softplc.core.clock import SimClock
-from softplc.config import load_config
 from softplc.adapters.opcua import OpcUaServer, OpcUaSettings
+from softplc.app.adapters import build_adapters
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import SimClock
 from tests.alarms_support import DRIVER, call, plant, simulate, write
 from tests.opcua_support import PASSWORDS, add_users
 

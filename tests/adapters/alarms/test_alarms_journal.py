@@ -8,11 +8,11 @@ import io
 from pathlib import Path
 
 from softplc.app.adapters import build_adapters
-from softplc.storage.alarm_journal import AlarmJournal, JournalQuery, JournalSink, search, write_csv
-from softplc.core.clock import RealClock
-from softplc.config import load_config
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
 from softplc.storage import BatchWriter, Database, StorageSettings
+from softplc.storage.alarm_journal import AlarmJournal, JournalQuery, JournalSink, search, write_csv
 from tests.alarms_support import DRIVER, EPOCH, PEOPLE, call, plant, simulate, write
 
 ALARMS = """

@@ -9,9 +9,9 @@ from __future__ import annotations
 import asyncio
 import json
 
+from tests.adapters.opcua.test_opcua_node import NODE_DIR, _require_node_opcua
 from tests.alarms_support import DRIVER, plant, running_alarm_plant
 from tests.opcua_support import PASSWORDS
-from tests.adapters.opcua.test_opcua_node import NODE_DIR, _require_node_opcua
 
 ALARMS = """
 definitions:

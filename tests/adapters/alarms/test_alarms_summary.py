@@ -7,12 +7,12 @@ import time
 
 from pymodbus.client import AsyncModbusTcpClient
 
-from softplc.app.adapters import build_adapters
-from softplc.core.clock import RealClock
-from softplc.config import load_config
 from softplc.adapters.modbus.server import ModbusAdapter
 from softplc.adapters.modbus.settings import ModbusSettings
+from softplc.app.adapters import build_adapters
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
 from softplc.core.tagdb import Rule
 from tests.alarms_support import DRIVER, PEOPLE, call, client_write, plant, simulate, write
 

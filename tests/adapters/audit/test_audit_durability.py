@@ -20,15 +20,14 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import REPO
 from pymodbus.client import ModbusTcpClient
 
-from softplc.storage.audit.queries import AuditQuery, search
-from softplc.config import load_config
 from softplc.adapters.modbus.server import ModbusAdapter
 from softplc.adapters.modbus.settings import ModbusSettings
+from softplc.config import load_config
 from softplc.storage import Database, StorageSettings
-
-from conftest import REPO
+from softplc.storage.audit.queries import AuditQuery, search
 
 FLUSH = 0.25  # s
 # A commit takes its own time, and on a shared 2-core machine the child may wait for the CPU for

@@ -10,14 +10,14 @@ from pathlib import Path
 import pytest
 
 from softplc.app.adapters import build_adapters
-from softplc.storage.audit.queries import AuditQuery, search
+from softplc.app.runtime import AdapterError, Runtime
+from softplc.config import load_config
 from softplc.core.clock import RealClock
 from softplc.core.commands import CommandRefused
-from softplc.config import load_config
 from softplc.core.roles import Role
-from softplc.app.runtime import AdapterError, Runtime
-from softplc.storage import Database
 from softplc.core.tagdb import Origin
+from softplc.storage import Database
+from softplc.storage.audit.queries import AuditQuery, search
 
 PEOPLE = {role.value: Origin("hmi", role.value, "10.0.0.5:40000", role) for role in Role}
 DRIVER = Origin("fleet:r01", role=None)

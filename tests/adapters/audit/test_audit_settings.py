@@ -9,11 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from softplc.config import sections
 from softplc.app.adapters import build_adapters
-from softplc.storage.audit.settings import DEFAULT_PARTITION, DEFAULT_RETENTION, AuditSettings
 from softplc.app.cli import build_parser, main
-from softplc.config import load_config
+from softplc.config import load_config, sections
+from softplc.storage.audit.settings import DEFAULT_PARTITION, DEFAULT_RETENTION, AuditSettings
 
 PLANT = """\
 version: 1

@@ -16,7 +16,17 @@ import aiohttp
 from asyncua import ua
 from pymodbus.client import AsyncModbusTcpClient
 
-from tests.audit_support import PASSWORDS, adapter, call_door, entries, local_address, opcua_client, running, softplc, wait_until
+from tests.audit_support import (
+    PASSWORDS,
+    adapter,
+    call_door,
+    entries,
+    local_address,
+    opcua_client,
+    running,
+    softplc,
+    wait_until,
+)
 
 
 def row(entry: Any) -> tuple[Any, ...]:

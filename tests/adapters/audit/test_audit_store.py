@@ -6,13 +6,13 @@ import csv
 import io
 from typing import Any
 
+from softplc.core.commands import CommandCall
+from softplc.core.roles import Role
+from softplc.core.tagdb import Origin, Rule, WriteEvent
+from softplc.storage import BatchWriter, Database, StorageSettings
 from softplc.storage.audit.entry import MAX_REFUSED, CallRecord
 from softplc.storage.audit.queries import AuditQuery, search, write_csv
 from softplc.storage.audit.store import CATALOGUE, AuditSink
-from softplc.core.commands import CommandCall
-from softplc.core.roles import Role
-from softplc.storage import BatchWriter, Database, StorageSettings
-from softplc.core.tagdb import Origin, Rule, WriteEvent
 
 DAY = 86400.0
 T0 = 1_767_225_600.0  # 2026-01-01T00:00:00Z

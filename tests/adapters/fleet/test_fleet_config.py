@@ -7,14 +7,13 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import REPO
 
+from softplc.adapters.fleet import Compatibility, Hardware, compatibility_matrix, compatible, load_robots, load_tasks
 from softplc.app.cli import main
 from softplc.config import load_config
-from softplc.adapters.fleet import Compatibility, Hardware, compatibility_matrix, compatible, load_robots, load_tasks
-from softplc.robotics.robots import DriverKind, parse_robots, parse_tasks
 from softplc.config.yamlsource import ConfigError
-
-from conftest import REPO
+from softplc.robotics.robots import DriverKind, parse_robots, parse_tasks
 
 ROBOTS = REPO / "robots"
 

@@ -7,16 +7,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from softplc.core.clock import SimClock
-from softplc.config import load_config
-from softplc.adapters.fleet.adapter import FleetAdapter
-from softplc.robotics.gridmap import OccupancyGrid, load_map
-from softplc.robotics.loop import Sample
-from softplc.app.runtime import AdapterError, Runtime
-
 from conftest import REPO
 from fleet_support import Plant, min_separation, robot_yaml, write_plant
+
+from softplc.adapters.fleet.adapter import FleetAdapter
+from softplc.app.runtime import AdapterError, Runtime
+from softplc.config import load_config
+from softplc.core.clock import SimClock
+from softplc.robotics.gridmap import OccupancyGrid, load_map
+from softplc.robotics.loop import Sample
 
 FACTORY = REPO / "robots" / "maps" / "factory.yaml"
 STATIONS = [(3.5, 7.5), (1.8, 2.5), (18.5, 7.5), (20.1, 2.4)]  # SPEC §2: both tasks' source and destination

@@ -7,13 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REPO
 
+from softplc.config.yamlsource import ConfigError
 from softplc.robotics.floor import Floor
 from softplc.robotics.gridmap import OccupancyGrid, grid_from_text, load_map, read_pgm
 from softplc.robotics.planner import Corridor, Disc, PathPlanner
-from softplc.config.yamlsource import ConfigError
-
-from conftest import REPO
 
 FACTORY = REPO / "robots" / "maps" / "factory.yaml"
 STATIONS = {"t01 source": (3.5, 7.5), "t01 destination": (1.8, 2.5), "t02 source": (18.5, 7.5), "t02 destination": (20.1, 2.4)}

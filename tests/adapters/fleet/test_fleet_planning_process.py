@@ -12,6 +12,8 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import REPO
+from fleet_support import Plant, robot_yaml, write_plant
 
 from softplc.core.clock import RealClock, SimClock
 from softplc.robotics.driver import PlanRequest, run_plan
@@ -19,9 +21,6 @@ from softplc.robotics.floor import Floor
 from softplc.robotics.gridmap import load_map
 from softplc.robotics.planner import Disc, Plan
 from softplc.robotics.planning import ClockPlanning, ProcessPlanning
-
-from conftest import REPO
-from fleet_support import Plant, robot_yaml, write_plant
 
 FACTORY = REPO / "robots" / "maps" / "factory.yaml"
 

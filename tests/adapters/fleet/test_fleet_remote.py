@@ -15,18 +15,17 @@ from pathlib import Path
 from urllib.parse import urlparse
 
 import pytest
-
-from softplc.core.clock import RealClock
-from softplc.config import load_config
-from softplc.adapters.fleet.adapter import FleetAdapter
-from softplc.robotics.gridmap import load_map
-from softplc.robotics.robots import load_robots
-from softplc.adapters.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
-from softplc.app.runtime import Runtime
-from softplc.core.tags import Quality
-
 from conftest import REPO
 from fleet_support import robot_yaml, write_plant
+
+from softplc.adapters.fleet.adapter import FleetAdapter
+from softplc.adapters.opcua import OpcUaServer, OpcUaSettings, Role, UserStore
+from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
+from softplc.core.tags import Quality
+from softplc.robotics.gridmap import load_map
+from softplc.robotics.robots import load_robots
 
 MAP = REPO / "robots" / "maps" / "factory.yaml"
 PASSWORD = "robot-pass-123"
@@ -123,7 +122,11 @@ async def test_remote_agent_registers_moves_survives_restart_and_goes_bad_when_g
 
 def make_certificate(directory: Path, name: str) -> tuple[Path, Path, bytes]:
     """A self-signed OPC UA client certificate (DER) and its key (PEM)."""
-    from asyncua.crypto.cert_gen import dump_private_key_as_pem, generate_private_key, generate_self_signed_app_certificate
+    from asyncua.crypto.cert_gen import (
+        dump_private_key_as_pem,
+        generate_private_key,
+        generate_self_signed_app_certificate,
+    )
     from cryptography import x509
     from cryptography.hazmat.primitives import serialization
     from cryptography.x509.oid import ExtendedKeyUsageOID

@@ -10,8 +10,8 @@ import pytest
 
 from softplc.adapters.history.aggregates import Aggregate, AggregateConfig, Flags, Result, intervals
 from softplc.adapters.history.reads import InvalidContinuation, read_processed, read_raw
-from softplc.storage import StorageSettings
 from softplc.core.tags import Quality
+from softplc.storage import StorageSettings
 from tests.adapters.history.test_history_store import T0, Store
 
 GOOD, UNCERTAIN, BAD = Quality.GOOD, Quality.UNCERTAIN, Quality.BAD

@@ -18,11 +18,10 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import REPO
 
 from softplc.adapters.history.queries import HistoryReader
 from softplc.storage import Database, StorageError, StorageSettings
-
-from conftest import REPO
 
 SUPPORT = REPO / "tests" / "history_support.py"
 FLUSH = 0.25  # s

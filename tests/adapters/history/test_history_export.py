@@ -9,10 +9,9 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import REPO
 
 from softplc.app.cli import main
-
-from conftest import REPO
 
 SUPPORT = REPO / "tests" / "history_support.py"
 

@@ -7,17 +7,16 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import REPO
 
-from softplc.app.adapters import build_adapters
-from softplc.core.clock import SimClock
-from softplc.config import load_config
 from softplc.adapters.history.queries import HistoryReader
 from softplc.adapters.history.settings import SIM_FILE
+from softplc.app.adapters import build_adapters
 from softplc.app.runtime import Runtime
-from softplc.storage import Database, StorageSettings
+from softplc.config import load_config
+from softplc.core.clock import SimClock
 from softplc.core.tags import Quality
-
-from conftest import REPO
+from softplc.storage import Database, StorageSettings
 
 SUPPORT = REPO / "tests" / "history_support.py"
 EPOCH = 1_767_225_600.0  # SimClock's wall time at 0
@@ -200,8 +199,8 @@ def test_the_default_plant_records_its_robot_and_task_tags() -> None:
 
 @pytest.mark.parametrize("simulated", [True, False])
 async def test_a_store_that_cannot_be_opened_stops_the_start_with_the_reason(tmp_path: Path, simulated: bool) -> None:
-    from softplc.core.clock import RealClock
     from softplc.app.runtime import AdapterError
+    from softplc.core.clock import RealClock
 
     path = tmp_path / "tagdb.yaml"
     path.write_text(textwrap.dedent(PLANT))

@@ -12,8 +12,8 @@ from softplc.adapters.history.aggregates import Sample
 from softplc.adapters.history.columns import QUALITY_CODES
 from softplc.adapters.history.queries import Continuation, HistoryReader, UnknownTag
 from softplc.adapters.history.store import HistorySink, TagInfo
-from softplc.storage import BatchWriter, Database, StorageSettings
 from softplc.core.tags import Quality
+from softplc.storage import BatchWriter, Database, StorageSettings
 
 T0 = 1_767_225_600.0  # 2026-01-01T00:00:00Z, a partition boundary
 GOOD, BAD = Quality.GOOD, Quality.BAD

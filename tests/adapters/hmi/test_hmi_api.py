@@ -16,8 +16,8 @@ from typing import Any
 import aiohttp
 import pytest
 import pytest_asyncio
-
 from hmi_support import DRIVER, PASSWORDS, Plant, http_client, http_login, receive_until, start_plant, wait_until
+
 from softplc.core.tagdb import Rule, WriteEvent, WriteRejected
 from softplc.core.tags import Quality
 

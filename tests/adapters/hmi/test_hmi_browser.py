@@ -14,9 +14,21 @@ from typing import Any
 
 import pytest
 import pytest_asyncio
-
-from hmi_support import (ARTIFACTS, SCRIPT_DESCRIPTION, Plant, browser, chromium_available, playwright_available, log_in, open_page, plant_yaml,  # noqa: F401 (browser: a fixture)
-                         ready, screenshot_on_failure, start_plant, wait_until)
+from hmi_support import (  # noqa: F401 (browser: a fixture)
+    ARTIFACTS,
+    SCRIPT_DESCRIPTION,
+    Plant,
+    browser,
+    chromium_available,
+    log_in,
+    open_page,
+    plant_yaml,
+    playwright_available,
+    ready,
+    screenshot_on_failure,
+    start_plant,
+    wait_until,
+)
 from tools_support import missing
 
 if not playwright_available():

@@ -20,9 +20,9 @@ from typing import Any
 
 import pytest
 import pytest_asyncio
-
-from hmi_support import Plant, http_client, http_login, post_command, receive_until, strict_json, wait_until
 from hmi_supervisory_support import start_supervisory_plant
+from hmi_support import Plant, http_client, http_login, post_command, receive_until, strict_json, wait_until
+
 from softplc.core.commands import CommandCall, Permission
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

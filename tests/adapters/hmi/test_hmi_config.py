@@ -6,14 +6,14 @@ import argparse
 from pathlib import Path
 
 import pytest
-
 from hmi_support import REPO, plant_yaml, write_plant
+
+from softplc.adapters.hmi.settings import HmiSettings, hmi_problems
 from softplc.app.adapters import build_adapters
 from softplc.app.cli import main
 from softplc.config import load_config
-from softplc.adapters.hmi.settings import HmiSettings, hmi_problems
-from softplc.core.roles import Role
 from softplc.config.yamlsource import ConfigError
+from softplc.core.roles import Role
 
 BAD_VIEW = """
 hmi:

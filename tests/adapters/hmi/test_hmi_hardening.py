@@ -16,9 +16,9 @@ from typing import Any
 import aiohttp
 import pytest
 import pytest_asyncio
-
 from audit_support import entries, running
 from hmi_support import Plant, http_client, http_login, receive_until, start_plant
+
 from softplc.core.tagdb import Rule, WriteEvent
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
@@ -235,7 +235,6 @@ async def test_an_expression_is_current_in_a_snapshot_after_changes_nobody_watch
 async def test_deeply_nested_json_to_the_opc_ua_commands_door_is_an_invalid_argument(tmp_path: Path) -> None:
     """The same commands through OPC UA (Objects/Commands.Call, JSON arguments): BadInvalidArgument, not BadInternalError."""
     from asyncua import ua
-
     from audit_support import opcua_client
 
     async with running(tmp_path) as runtime:

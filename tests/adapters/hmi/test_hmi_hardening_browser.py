@@ -13,8 +13,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
-from hmi_support import browser, chromium_available, log_in, open_page, ready, screenshot_on_failure, start_plant, wait_until  # noqa: F401
+from hmi_support import (  # noqa: F401
+    browser,
+    chromium_available,
+    log_in,
+    open_page,
+    ready,
+    screenshot_on_failure,
+    start_plant,
+    wait_until,
+)
 
 pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
 if not chromium_available():

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import aiohttp
 import pytest
-
 from hmi_support import plant_yaml, receive_until, start_plant, wait_until
-from softplc.core.clock import SimClock
+
 from softplc.adapters.hmi.fanout import MAX_QUEUED
+from softplc.core.clock import SimClock
 
 pytestmark = pytest.mark.asyncio
 

@@ -18,12 +18,24 @@ from typing import Any
 
 import pytest
 import pytest_asyncio
+from hmi_support import (  # noqa: F401 (browser: a fixture)
+    ARTIFACTS,
+    Plant,
+    browser,
+    chromium_available,
+    log_in,
+    open_page,
+    plant_yaml,
+    playwright_available,
+    ready,
+    screenshot_on_failure,
+    start_plant,
+    wait_until,
+)
+from tools_support import missing
 
-from hmi_support import (ARTIFACTS, Plant, browser, chromium_available, playwright_available, log_in, open_page, plant_yaml, ready,  # noqa: F401 (browser: a fixture)
-                         screenshot_on_failure, start_plant, wait_until)
 from softplc.core.roles import Role
 from softplc.core.tagdb import Origin
-from tools_support import missing
 
 if not playwright_available():
     missing("the playwright package is not installed (pip install -e .[test]; scripts/bootstrap.sh test)", module=True)

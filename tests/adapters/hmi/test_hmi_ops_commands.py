@@ -17,8 +17,8 @@ from typing import Any
 import aiohttp
 import pytest
 import pytest_asyncio
-
 from hmi_support import Plant, http_client, http_login, post_command, receive_until, start_plant, wait_until
+
 from softplc.core.commands import CommandCall
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

@@ -12,9 +12,20 @@ from typing import Any
 
 import pytest
 import pytest_asyncio
+from hmi_support import (  # noqa: F401 (browser: a fixture)
+    ARTIFACTS,
+    DRIVER,
+    Plant,
+    browser,
+    chromium_available,
+    log_in,
+    open_page,
+    plant_yaml,
+    ready,
+    screenshot_on_failure,
+    start_plant,
+)
 
-from hmi_support import (ARTIFACTS, DRIVER, Plant, browser, chromium_available, log_in, open_page, plant_yaml, ready,  # noqa: F401 (browser: a fixture)
-                         screenshot_on_failure, start_plant)
 from softplc.core.tags import Quality
 
 pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")

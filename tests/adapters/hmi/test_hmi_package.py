@@ -13,8 +13,8 @@ import zipfile
 from pathlib import Path
 
 import pytest
-
 from hmi_support import REPO
+
 from softplc.adapters.hmi.assets import AssetsNotFound, find_assets
 
 pytestmark = pytest.mark.slow

@@ -10,6 +10,7 @@ from __future__ import annotations
 import re
 
 from hmi_support import REPO
+
 from softplc.adapters.hmi.security import CONTENT_SECURITY_POLICY
 
 FORBIDDEN = {

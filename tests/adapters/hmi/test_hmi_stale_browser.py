@@ -11,9 +11,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
-from hmi_support import (ARTIFACTS, browser, chromium_available, log_in, open_page, ready,  # noqa: F401 (browser: a fixture)
-                         screenshot_on_failure, start_plant)
+from hmi_support import (  # noqa: F401 (browser: a fixture)
+    ARTIFACTS,
+    browser,
+    chromium_available,
+    log_in,
+    open_page,
+    ready,
+    screenshot_on_failure,
+    start_plant,
+)
 
 pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
 if not chromium_available():

@@ -17,12 +17,23 @@ from typing import Any
 
 import pytest
 import pytest_asyncio
-
-from hmi_support import (ARTIFACTS, REPO, Plant, browser, chromium_available, playwright_available, log_in, open_page, ready,  # noqa: F401 (browser: a fixture)
-                         screenshot_on_failure, wait_until)
 from hmi_supervisory_support import start_supervisory_plant
-from softplc.core.clock import SimClock
+from hmi_support import (  # noqa: F401 (browser: a fixture)
+    ARTIFACTS,
+    REPO,
+    Plant,
+    browser,
+    chromium_available,
+    log_in,
+    open_page,
+    playwright_available,
+    ready,
+    screenshot_on_failure,
+    wait_until,
+)
 from tools_support import missing
+
+from softplc.core.clock import SimClock
 
 if not playwright_available():
     missing("the playwright package is not installed (pip install -e .[test]; scripts/bootstrap.sh test)", module=True)

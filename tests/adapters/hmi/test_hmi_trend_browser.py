@@ -16,9 +16,9 @@ from typing import Any
 
 import pytest
 import pytest_asyncio
-
-from hmi_support import Plant, browser, chromium_available, open_page, ready, screenshot_on_failure, wait_until  # noqa: F401 (browser: a fixture)
 from hmi_supervisory_support import PLANT, start_supervisory_plant
+from hmi_support import Plant, browser, chromium_available, open_page, ready, screenshot_on_failure, wait_until  # noqa: F401 (browser: a fixture)
+
 from softplc.core.clock import SimClock
 from softplc.core.tags import Quality
 

@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
 from hmi_support import ARTIFACTS, browser, chromium_available, open_page, ready, screenshot_on_failure, start_plant  # noqa: F401 (browser: a fixture)
+
 from softplc.adapters.links.manifest import build
 from tests.links_support import PymodbusRemote
 

@@ -18,20 +18,20 @@ import aiohttp
 import pytest
 import pytest_asyncio
 from asyncua import Client
+from conftest import REPO  # noqa: E402
+from hmi_support import PASSWORDS, add_users, start_plant, wait_until
 from prometheus_client.parser import text_string_to_metric_families
 from pymodbus.client import AsyncModbusTcpClient
 
-from hmi_support import PASSWORDS, add_users, start_plant, wait_until
-from softplc.app.adapters import build_adapters
-from softplc.core.clock import RealClock
-from softplc.config import load_config
+from softplc.adapters.hmi.metrics_settings import MetricsSettings
 from softplc.adapters.metrics.adapter import MetricsAdapter
 from softplc.adapters.metrics.histograms import SeriesHistogram
-from softplc.adapters.hmi.metrics_settings import MetricsSettings
+from softplc.app.adapters import build_adapters
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
 from softplc.core.stats import TimingSeries
 
-from conftest import REPO  # noqa: E402
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 
 
@@ -239,6 +239,7 @@ async def test_anonymous_scrapes_from_loopback_by_default_and_a_broken_adapter_i
 
 async def test_mistakes_in_the_metrics_settings_are_located_problems(tmp_path: Path) -> None:
     from hmi_support import plant_yaml, write_plant
+
     from softplc.config.yamlsource import ConfigError
 
     text = plant_yaml().replace("    port: 0\n", "    port: 0\n    metrics: {anonymous: everyone, token_file: \"\"}\n")

@@ -15,11 +15,11 @@ from pathlib import Path
 from typing import Any
 
 import aiohttp
-
 from hmi_support import start_plant
 from tools_support import missing
-from softplc.adapters.metrics.adapter import MetricsAdapter
+
 from softplc.adapters.hmi.metrics_settings import MetricsSettings
+from softplc.adapters.metrics.adapter import MetricsAdapter
 
 PROMETHEUS = shutil.which("prometheus") or ""
 if not PROMETHEUS:

@@ -11,10 +11,10 @@ import pytest
 from modbus_helpers import DOUBLER_PLANT as PLANT
 from modbus_helpers import mbap, start_plant, stop_plant
 
-from softplc.app.cli import main
-from softplc.config import load_config
 from softplc.adapters.modbus.connections import EventReport
 from softplc.adapters.modbus.settings import ModbusSettings
+from softplc.app.cli import main
+from softplc.config import load_config
 
 CONNECTIONS_LOGGER = "softplc.adapters.modbus.connections"
 

@@ -22,12 +22,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
-
 from conftest import REPO
 from modbus_helpers import mbpoll_path, polled
 
-from softplc.config import load_config
 from softplc.adapters.modbus.address_map import Table, build_address_map
+from softplc.config import load_config
 
 DOCS = [REPO / "docs" / "modbus.md", REPO / "README.md"]
 TABLES = {"0": "coil", "1": "discrete_input", "3": "input", "4": "holding"}

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import time
 
-from softplc.config import parse_config
 from softplc.adapters.modbus.address_map import Table, build_address_map
 from softplc.adapters.modbus.image import RegisterImage
+from softplc.config import parse_config
 from softplc.core.tagdb import TagDatabase
 
 COUNT = 1000

@@ -10,11 +10,11 @@ import struct
 
 import pytest
 
-from softplc.app.cli import main
-from softplc.core.datatypes import DataType
 from softplc.adapters.modbus.address_map import Table, build_address_map
-from softplc.protocols.modbus_codec import CodecError, RegisterCodec
+from softplc.app.cli import main
 from softplc.config.yamlsource import ConfigError
+from softplc.core.datatypes import DataType
+from softplc.protocols.modbus_codec import CodecError, RegisterCodec
 
 BASE = """
 version: 1

@@ -13,7 +13,6 @@ from modbus_helpers import DOUBLER_PLANT as PLANT
 from modbus_helpers import mbap, raw_request, start_plant, stop_plant, value_of
 
 
-
 @pytest.fixture
 async def plant(tmp_path):
     running = await start_plant(tmp_path, PLANT)

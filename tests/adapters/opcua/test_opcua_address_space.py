@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from asyncua import ua
 
-from softplc.core.datatypes import DataType
 from softplc.adapters.opcua.address_space import plan_folders
+from softplc.core.datatypes import DataType
 from softplc.core.tags import TagDef
 from tests.opcua_support import client_for, running_plant
 

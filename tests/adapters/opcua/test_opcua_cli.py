@@ -14,13 +14,13 @@ from pathlib import Path
 import pytest
 from asyncua import Client, ua
 
-from softplc.app.cli import main
-from softplc.core.clock import RealClock
-from softplc.config import load_config
 from softplc.adapters.opcua import OpcUaServer, OpcUaSettings, UserStore
 from softplc.adapters.opcua.settings import SettingsError
-from softplc.security.users import verify_password
+from softplc.app.cli import main
 from softplc.app.runtime import AdapterError, Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
+from softplc.security.users import verify_password
 from tests.conftest import REPO
 from tests.opcua_support import PLANT, write_config
 

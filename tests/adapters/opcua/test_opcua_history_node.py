@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from asyncua import ua
 
+from tests.adapters.opcua.test_opcua_node import _require_node_opcua, _run
 from tests.opcua_history_support import EPOCH, recorded_plant
 from tests.opcua_support import PASSWORDS
-from tests.adapters.opcua.test_opcua_node import _require_node_opcua, _run
 
 S = ua.StatusCodes
 MS = int(EPOCH * 1000)

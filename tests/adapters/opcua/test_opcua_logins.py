@@ -14,8 +14,8 @@ from asyncua import Client, ua
 from softplc.adapters.opcua import Role
 from softplc.security import logins as logins_module
 from softplc.security.logins import FAILURES_PER_PEER, FAILURES_PER_PEER_AND_USER, LoginThrottle, PasswordLogins
-from softplc.security.users import UserStore
 from softplc.security.passwords import SCRYPT_LOG2_N, verify_password
+from softplc.security.users import UserStore
 from tests.opcua_support import TEST_HASH_COST, client_for, running_plant
 
 in_module_loop = pytest.mark.asyncio(loop_scope="module")

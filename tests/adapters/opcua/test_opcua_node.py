@@ -12,9 +12,9 @@ from datetime import datetime
 
 import pytest
 
-from tests.conftest import REPO
 from softplc.adapters.opcua import Pki
 from softplc.security.certificates import fingerprint
+from tests.conftest import REPO
 from tests.opcua_support import PASSWORDS, make_client_certificate, running_plant
 
 NODE_DIR = REPO / "tests" / "node"

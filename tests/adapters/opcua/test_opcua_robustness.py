@@ -15,8 +15,8 @@ import pytest_asyncio
 from asyncua import ua
 from asyncua.ua.ua_binary import struct_from_binary, struct_to_binary, uatcp_to_binary
 
-from softplc.util.peers import PeerLog
 from softplc.adapters.opcua.settings import DEFAULT_MAX_MESSAGE_SIZE
+from softplc.util.peers import PeerLog
 from tests.opcua_support import client_for, running_plant, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

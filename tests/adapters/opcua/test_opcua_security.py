@@ -14,9 +14,9 @@ import pytest_asyncio
 from asyncua import Client, ua
 
 from softplc.adapters.opcua import Pki, Role, UserStore
+from softplc.protocols.opcua_client import make_client
 from softplc.security.certificates import fingerprint
 from tests.conftest import REPO
-from softplc.protocols.opcua_client import make_client
 from tests.opcua_support import PASSWORDS, client_for, make_client_certificate, running_plant, wait_until
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")

@@ -13,8 +13,8 @@ import pytest
 import pytest_asyncio
 from asyncua import ua
 
-from softplc.core.clock import SimClock
 from softplc.adapters.opcua.history import HistoryPage, Sample
+from softplc.core.clock import SimClock
 from softplc.core.tags import Quality
 from tests.opcua_support import client_for, running_plant, wait_until
 

@@ -11,12 +11,12 @@ from pathlib import Path
 from asyncua import ua
 from pymodbus.client import AsyncModbusTcpClient
 
-from softplc.core.clock import RealClock
-from softplc.config import load_config
 from softplc.adapters.modbus.server import ModbusAdapter
 from softplc.adapters.modbus.settings import ModbusSettings
 from softplc.adapters.opcua import OpcUaServer, OpcUaSettings
 from softplc.app.runtime import Runtime
+from softplc.config import load_config
+from softplc.core.clock import RealClock
 from softplc.core.tagdb import WriteEvent
 from tests.opcua_support import add_users, client_for, running_plant, wait_until
 

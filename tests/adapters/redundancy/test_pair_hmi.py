@@ -12,7 +12,6 @@ import pytest
 from softplc.app.adapters import build_adapters
 from softplc.app.runtime import Runtime
 from softplc.config import load_config
-
 from tests.adapters.redundancy.pair_support import free_port, write_pair
 from tests.adapters.redundancy.test_pair_inprocess import role, until
 from tests.hmi_support import ARTIFACTS, browser, chromium_available, open_page, screenshot_on_failure  # noqa: F401

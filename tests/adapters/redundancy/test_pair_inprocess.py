@@ -18,7 +18,6 @@ from softplc.app.runtime import Runtime
 from softplc.config import load_config
 from softplc.core.roles import Role
 from softplc.core.tagdb import Origin, Rule
-
 from tests.adapters.redundancy.pair_support import write_pair
 
 OPERATOR = Origin("opcua", "olga", "127.0.0.1", role=Role.OPERATOR)

@@ -12,10 +12,9 @@ from typing import Any
 
 import pytest
 
-from softplc.security.pair_certificates import link_context, make_pair
 from softplc.adapters.redundancy.link import VERSION, encode, read_message
 from softplc.app.runtime import Runtime
-
+from softplc.security.pair_certificates import link_context, make_pair
 from tests.adapters.redundancy.pair_support import write_pair
 from tests.adapters.redundancy.test_pair_inprocess import member, role, until
 

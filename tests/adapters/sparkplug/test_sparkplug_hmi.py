@@ -10,7 +10,16 @@ import pytest
 from softplc.adapters.sparkplug.edge_node import EdgeNode
 from softplc.adapters.sparkplug.settings import SparkplugSettings
 from softplc.protocols.mqtt_settings import MqttSettings
-from tests.hmi_support import ARTIFACTS, browser, chromium_available, open_page, plant_yaml, ready, screenshot_on_failure, start_plant  # noqa: F401
+from tests.hmi_support import (  # noqa: F401
+    ARTIFACTS,
+    browser,
+    chromium_available,
+    open_page,
+    plant_yaml,
+    ready,
+    screenshot_on_failure,
+    start_plant,
+)
 
 pytestmark = [pytest.mark.skipif(not chromium_available(), reason="Chromium is not installed (scripts/install-test-tools.sh)"),
               pytest.mark.asyncio(loop_scope="module")]

@@ -9,6 +9,9 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from conftest import REPO
+from mosquitto_server import MosquittoServer, MosquittoUnavailable, free_port
+from vda5050_support import MAP, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 from softplc.clients.robot_agent.vda5050.agent import VehicleAgent
 from softplc.clients.robot_agent.vda5050.vehicle import Vehicle
@@ -19,10 +22,6 @@ from softplc.protocols.vda5050.messages import Headers
 from softplc.robotics.floor import Floor
 from softplc.robotics.gridmap import load_map
 from softplc.robotics.robots import Pose, load_robots
-
-from conftest import REPO
-from mosquitto_server import MosquittoServer, MosquittoUnavailable, free_port
-from vda5050_support import MAP, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 CONTRIB = REPO / "contrib" / "mosquitto"
 

@@ -7,11 +7,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from conftest import REPO
+from vda5050_support import ROADMAP, LibVehicles, start_plant, wait_for
 
 from softplc.core.tags import Quality
-
-from conftest import REPO
-from vda5050_support import LibVehicles, ROADMAP, start_plant, wait_for
 
 EXAMPLE = REPO / "examples" / "vda5050"
 

@@ -8,12 +8,11 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from vda5050_support import MAP, LibVehicles, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 from softplc.config.yamlsource import ConfigError
-from softplc.robotics.robots import parse_robots
 from softplc.robotics.roadmap import parse_roadmap
-
-from vda5050_support import MAP, LibVehicles, adapter, start_plant, vehicle_yaml, wait_for, write_plant
+from softplc.robotics.robots import parse_robots
 
 
 def messages(error: ConfigError) -> list[str]:

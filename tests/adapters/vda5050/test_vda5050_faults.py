@@ -9,11 +9,10 @@ import time
 from pathlib import Path
 
 import pytest
+from vda5050_support import ROADMAP, LibVehicles, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 from softplc.core.origin import Origin
 from softplc.core.tags import Quality
-
-from vda5050_support import ROADMAP, LibVehicles, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 P1, P3, T01_SRC, T02_SRC = (7.925, 5.925), (7.925, 2.925), (3.5, 7.5), (18.5, 7.5)
 

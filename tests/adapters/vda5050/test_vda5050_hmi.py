@@ -9,6 +9,8 @@ import os
 from pathlib import Path
 
 import pytest
+from hmi_support import ARTIFACTS, browser, chromium_available, open_page, ready, screenshot_on_failure  # noqa: F401 (fixture)
+from vda5050_support import MAP, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 from softplc.clients.robot_agent.vda5050.agent import VehicleAgent
 from softplc.core.clock import RealClock
@@ -18,9 +20,6 @@ from softplc.robotics.controller import SpeedLimits
 from softplc.robotics.floor import Floor
 from softplc.robotics.gridmap import load_map
 from softplc.robotics.robots import load_robots
-
-from hmi_support import ARTIFACTS, browser, chromium_available, open_page, ready, screenshot_on_failure  # noqa: F401 (fixture)
-from vda5050_support import MAP, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 

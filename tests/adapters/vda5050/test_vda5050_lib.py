@@ -5,8 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
-
 from vda5050_support import LibVehicles, Wire, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 P1, P3, T01_SRC, T02_SRC, U2 = (7.925, 5.925), (7.925, 2.925), (3.5, 7.5), (18.5, 7.5), (5.5, 6.6)

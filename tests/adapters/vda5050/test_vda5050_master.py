@@ -7,6 +7,8 @@ import functools
 import json
 from pathlib import Path
 
+from vda5050_support import MAP, Wire, adapter, start_plant, vehicle_yaml, wait_for, write_plant
+
 from softplc.clients.robot_agent.vda5050.agent import VehicleAgent
 from softplc.core.clock import RealClock
 from softplc.core.tags import Quality
@@ -15,8 +17,6 @@ from softplc.robotics.controller import SpeedLimits
 from softplc.robotics.floor import Floor
 from softplc.robotics.gridmap import load_map
 from softplc.robotics.robots import load_robots
-
-from vda5050_support import MAP, Wire, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 P1, P3, T01_SRC, U3 = (7.925, 5.925), (7.925, 2.925), (3.5, 7.5), (7.925, 6.6)
 
@@ -69,10 +69,10 @@ async def test_a_goal_becomes_an_order_the_vehicle_drives_and_every_message_fits
 async def test_our_vehicle_drives_through_every_node_of_its_base_at_the_turtlebots_own_speed(tmp_path: Path) -> None:
     """On the simulated clock, no broker: the agent's TurtleBot (0.2 m/s) passes each node within its deviation and
     runs its pick; it once stopped 0.4 m short of the first node, its driver restarting the trip at every cycle."""
+    from softplc.clients.robot_agent.vda5050.agent import VehicleIO
     from softplc.core.clock import SimClock
     from softplc.protocols.vda5050.messages import Headers, action, edge, node
     from softplc.robotics.loop import ControlLoop
-    from softplc.clients.robot_agent.vda5050.agent import VehicleIO
 
     tagdb = write_plant(tmp_path, "mqtt://127.0.0.1:1", [vehicle_yaml("r01", "tb1", 10.0, 7.6, speed=0.2)])
     clock = SimClock()

@@ -5,12 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from vda5050_support import ROADMAP, LibVehicles, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 from softplc.adapters.vda5050.traffic import Reservations, lane_resource, node_resource
 from softplc.protocols.vda5050.messages import VehicleState
 from softplc.robotics.roadmap import load_roadmap
-
-from vda5050_support import ROADMAP, LibVehicles, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 P1, P3 = (7.925, 5.925), (7.925, 2.925)
 

@@ -9,6 +9,7 @@ import logging
 from pathlib import Path
 
 import pytest
+from vda5050_support import adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 from softplc.clients.robot_agent.vda5050.vehicle import Vehicle
 from softplc.core.clock import RealClock
@@ -17,8 +18,6 @@ from softplc.protocols.mqtt import MqttConnection
 from softplc.protocols.mqtt_settings import MqttSettings
 from softplc.protocols.vda5050.messages import Headers
 from softplc.robotics.robots import Pose
-
-from vda5050_support import adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 TOPIC = "uagv/v2/softplc/tb1/state"
 
