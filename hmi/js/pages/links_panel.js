@@ -32,9 +32,9 @@ export async function linksPanel() {
       el('td', { class: 'link-name' }, el('strong', { text: link.name }), el('div', { class: 'muted small ref', text: `${link.protocol} ${link.address}` }),
         el('div', { class: 'muted small', text: `every ${formatNumber(link.period_ms)} ms` })),
       el('td', { class: 'link-state' }, state, live(`${link.prefix}error`, el('div', { class: 'error-text small', text: link.error }), text)),
-      el('td', { class: 'num' }, live(`${link.prefix}bad_tags`, el('span', { text: formatNumber(link.bad_tags) }), count)),
-      el('td', { class: 'num' }, live(`${link.prefix}reconnects`, el('span', { text: formatNumber(link.reconnects) }), count)),
-      el('td', { class: 'num' }, live(`${link.prefix}round_trip_ms`, el('span', { text: formatNumber(link.round_trip_ms, 2) }),
+      el('td', { class: 'num', 'data-label': 'bad tags' }, live(`${link.prefix}bad_tags`, el('span', { text: formatNumber(link.bad_tags) }), count)),
+      el('td', { class: 'num', 'data-label': 'reconnects' }, live(`${link.prefix}reconnects`, el('span', { text: formatNumber(link.reconnects) }), count)),
+      el('td', { class: 'num', 'data-label': 'round trip ms' }, live(`${link.prefix}round_trip_ms`, el('span', { text: formatNumber(link.round_trip_ms, 2) }),
         (node, value) => setText(node, formatNumber(value, 2)))),
       el('td', {}, details));
   });
@@ -49,7 +49,7 @@ export async function linksPanel() {
 }
 
 async function showTags(details, link) {
-  const old = details.querySelector('table');
+  const old = details.querySelector('.link-tags-table');
   if (old) old.remove();
   const answer = await command('links.tags', { link });
   if (!answer.ok) {
@@ -60,7 +60,7 @@ async function showTags(details, link) {
     el('td', { text: row.tag }), el('td', { class: 'ref small', text: row.source }), el('td', { text: row.direction }),
     el('td', {}, el('span', { class: `chip ${QUALITIES[row.quality] || 'idle'}`, text: row.quality })),
     el('td', { class: 'small', text: row.reason }))));
-  details.append(el('table', { class: 'data small' },
-    el('thead', {}, el('tr', {}, ...['tag', 'source', 'direction', 'quality', 'why'].map((name) => el('th', { text: name })))), body));
+  details.append(el('div', { class: 'scroll-x link-tags-table' }, el('table', { class: 'data small' },
+    el('thead', {}, el('tr', {}, ...['tag', 'source', 'direction', 'quality', 'why'].map((name) => el('th', { text: name })))), body)));
 }
 
