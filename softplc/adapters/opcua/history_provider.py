@@ -1,4 +1,4 @@
-"""The OPC UA server's HistoryProvider over the historian's commands (`history.*` on `runtime.commands`).
+"""The OPC UA server's HistoryProvider over the historian's commands (`history.*` on `plant.commands`).
 
 The OPC UA adapter never imports the historian: it asks the command registry. `CommandHistory.
 connect(commands)` is None when no historian runs; otherwise it has learnt, once, which tags
