@@ -50,6 +50,19 @@ async def settle(runtime: Runtime, value: int) -> None:
     await until(lambda: runtime.db.value("spare") == value, 2, f"spare = {value} applied")
 
 
+async def spare_high(runtime: Runtime) -> str:
+    """The state of the alarm spare_high as `alarms.list` shows it (the HMI's and OPC UA's view)."""
+    (listed,) = await runtime.commands.call("alarms.list", {"name": "spare_high"}, OPERATOR)
+    return str(listed["state"])
+
+
+async def until_state(runtime: Runtime, state: str, what: str) -> None:
+    deadline = time.monotonic() + 2.0
+    while await spare_high(runtime) != state:
+        assert time.monotonic() < deadline, f"not within 2 s: {what}"
+        await asyncio.sleep(0.01)
+
+
 async def test_history_alarm_journal_and_audit_are_written_once_across_a_failover(tmp_path: Path, etcd: Any, postgres_dsn: str) -> None:
     path = write_pair(tmp_path, etcd.endpoint, extra=STORAGE.format(dsn=postgres_dsn.replace('"', '\\"')))
     a, b = member(path, "a", tmp_path), member(path, "b", tmp_path)
@@ -61,9 +74,9 @@ async def test_history_alarm_journal_and_audit_are_written_once_across_a_failove
         assert a.db.submit([("setpoint", 2.5)], OPERATOR) == [None]
         for value in (1, 2, 150):
             await settle(a, value)
-        await until(lambda: a.db.value("_sys.alarms.unacknowledged") == 1, 2, "spare_high annunciated")
+        await until_state(a, "unacknowledged", "spare_high annunciated")
         await a.commands.call("alarms.acknowledge", {"alarm": "spare_high", "comment": "seen"}, OPERATOR)
-        await until(lambda: b.db.value("spare") == 150 and b.db.value("_sys.alarms.unacknowledged") == 0, 2, "b mirrors the acknowledgement")
+        await until_state(b, "acknowledged", "b mirrors the acknowledgement")
 
         # The standby restarts (maintenance) while the active records: it writes nothing, not even an end of recording.
         await b.stop()
@@ -71,6 +84,8 @@ async def test_history_alarm_journal_and_audit_are_written_once_across_a_failove
         runtimes[1] = b
         await b.start()
         await until(lambda: b.db.value("_sys.redundancy.peer_ok") and b.db.value("spare") == 150, 10, "b in sync again")
+        # its first full state carried the alarms' part: b took it (its alarms adapter had started), not refused it
+        assert a.db.value("_sys.redundancy.refused") == 0 and b.db.value("_sys.redundancy.refused") == 0
         await settle(a, 120)  # still high: spare_high stays active and acknowledged
         await until(lambda: b.db.value("spare") == 120, 2, "b mirrors spare")
 
