@@ -41,7 +41,6 @@ import yaml
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from softplc.engine.online_change import change as online_change  # noqa: E402
 from softplc.app.adapters import build_adapters  # noqa: E402
 from softplc.app.cli import build_parser  # noqa: E402
 from softplc.app.runtime import Runtime  # noqa: E402
@@ -49,6 +48,7 @@ from softplc.config import load_config  # noqa: E402
 from softplc.core.clock import RealClock  # noqa: E402
 from softplc.core.roles import Role  # noqa: E402
 from softplc.core.tagdb import Origin  # noqa: E402
+from softplc.engine.online_change import change as online_change  # noqa: E402
 from softplc.util import realtime  # noqa: E402
 
 GOAL_EXTRA_P99_MS = 1.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import textwrap
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -86,21 +87,10 @@ def storage_settings(request, tmp_path: Path):
 
 @pytest.fixture
 def mosquitto():
-    """A mosquitto broker on a free loopback port for one test (stop() and start() it to restart it).
-
-    Skipped when mosquitto is missing, except under CI (CI=true), where scripts/install-test-tools.sh
-    must have installed it: there it fails.
-    """
-    import os
-
+    """A mosquitto broker on a free loopback port for one test (stop() and start() it to restart it)."""
     from tests.mosquitto_server import MosquittoServer, MosquittoUnavailable
 
-    try:
-        server = MosquittoServer()
-    except MosquittoUnavailable as error:
-        if os.environ.get("CI"):
-            raise
-        pytest.skip(str(error))
+    server = _test_server(MosquittoServer, MosquittoUnavailable)
     server.start()
     try:
         yield server
@@ -108,26 +98,28 @@ def mosquitto():
         server.stop()
 
 
+def _test_server(make: Callable[[], Any], unavailable: type[Exception]) -> Any:
+    """A server the test tools installed, or a skip with why — except under CI (CI=true), where
+    scripts/install-test-tools.sh must have installed it: there the missing tool fails the test."""
+    import os
+
+    try:
+        return make()
+    except unavailable as error:
+        if os.environ.get("CI"):
+            raise
+        pytest.skip(str(error))
+
+
 # -- etcd: the redundant pair's coordinator ----------------------------------------------------------
 
 
 @pytest.fixture
 def etcd():
-    """A single-node etcd on free loopback ports for one test (stop() and start() it to restart it).
-
-    Skipped when etcd is missing, except under CI (CI=true), where scripts/install-test-tools.sh
-    must have installed it: there it fails.
-    """
-    import os
-
+    """A single-node etcd on free loopback ports for one test (stop() and start() it to restart it)."""
     from tests.etcd_server import EtcdServer, EtcdUnavailable
 
-    try:
-        server = EtcdServer()
-    except EtcdUnavailable as error:
-        if os.environ.get("CI"):
-            raise
-        pytest.skip(str(error))
+    server = _test_server(EtcdServer, EtcdUnavailable)
     server.start()
     try:
         yield server
