@@ -271,7 +271,13 @@ async def test_kill_9_of_the_active_the_standby_serves_writes_in_about_a_second_
         await asyncio.sleep(0.5)
         await writer.stop()
         assert takeover < 3.0, f"the standby served writes {takeover:.2f} s after the kill"  # the goal, 1.5 s p95: bench/
+        # The last acknowledged write is journaled, applied at the next cycle boundary: read until
+        # it shows (a read right after the answer can come before that cycle on a busy machine).
+        applied_by = time.monotonic() + 2.0
         spare = (await observer.read(standby, "spare"))[0]
+        while spare < writer.acknowledged and time.monotonic() < applied_by:
+            await asyncio.sleep(0.05)
+            spare = (await observer.read(standby, "spare"))[0]
         assert spare >= writer.acknowledged, f"a write acknowledged Good ({writer.acknowledged}) was lost: {spare}"
         first = next(output for output in pair.device.outputs if output.member == standby)
         assert before is not None and before.scans <= first.scans <= before.scans + 1, (before, first)  # ≤ 1 cycle of state lost
