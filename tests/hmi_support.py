@@ -268,6 +268,16 @@ def chromium_available() -> bool:
     return Path(CHROMIUM).exists() and shutil.which("chromium") is not None
 
 
+def require_browser() -> None:
+    """At a browser test module's top: skip it without playwright or Chromium — under CI, fail it (tools_support.missing)."""
+    from tools_support import missing
+
+    if not playwright_available():
+        missing("the playwright package is not installed (pip install -e .[test]; scripts/bootstrap.sh test)", module=True)
+    if not chromium_available():
+        missing("Debian's chromium is not installed (scripts/install-test-tools.sh)", module=True)
+
+
 def playwright_available() -> bool:
     try:
         import playwright.async_api  # noqa: F401

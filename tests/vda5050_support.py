@@ -172,15 +172,11 @@ class LibVehicles:
     @staticmethod
     def require() -> None:
         """Skip the test when vda-5050-lib is missing, except under CI (CI=true): there, fail it with what is missing."""
-        import os
+        from tools_support import missing
 
-        import pytest
-
-        missing = LibVehicles.available()
-        if missing:
-            if os.environ.get("CI"):
-                pytest.fail(missing)
-            pytest.skip(missing)
+        lacking = LibVehicles.available()
+        if lacking:
+            missing(lacking)
 
     @staticmethod
     def available() -> str:

@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from tools_support import missing
 
 from softplc.app.adapters import build_adapters
 from softplc.app.runtime import Runtime
@@ -38,7 +39,7 @@ def server() -> Iterator[object]:
     try:
         postgres = PostgresServer()
     except PostgresUnavailable as error:
-        pytest.skip(str(error))
+        missing(str(error))
     postgres.start()
     try:
         yield postgres

@@ -22,25 +22,20 @@ from hmi_support import (  # noqa: F401 (browser: a fixture)
     ARTIFACTS,
     Plant,
     browser,
-    chromium_available,
     log_in,
     open_page,
     plant_yaml,
-    playwright_available,
     ready,
+    require_browser,
     screenshot_on_failure,
     start_plant,
     wait_until,
 )
-from tools_support import missing
 
 from softplc.core.roles import Role
 from softplc.core.tagdb import Origin
 
-if not playwright_available():
-    missing("the playwright package is not installed (pip install -e .[test]; scripts/bootstrap.sh test)", module=True)
-if not chromium_available():
-    missing("Debian's chromium is not installed (scripts/install-test-tools.sh)", module=True)
+require_browser()
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 ENGINEER = Origin("test", "erin", role=Role.ENGINEER)

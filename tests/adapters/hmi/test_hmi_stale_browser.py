@@ -14,17 +14,15 @@ import pytest
 from hmi_support import (  # noqa: F401 (browser: a fixture)
     ARTIFACTS,
     browser,
-    chromium_available,
     log_in,
     open_page,
     ready,
+    require_browser,
     screenshot_on_failure,
     start_plant,
 )
 
-pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
-if not chromium_available():
-    pytest.skip("Debian's chromium is not installed (scripts/install-test-tools.sh)", allow_module_level=True)
+require_browser()
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 

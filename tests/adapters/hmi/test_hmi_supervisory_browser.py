@@ -23,22 +23,17 @@ from hmi_support import (  # noqa: F401 (browser: a fixture)
     REPO,
     Plant,
     browser,
-    chromium_available,
     log_in,
     open_page,
-    playwright_available,
     ready,
+    require_browser,
     screenshot_on_failure,
     wait_until,
 )
-from tools_support import missing
 
 from softplc.core.clock import SimClock
 
-if not playwright_available():
-    missing("the playwright package is not installed (pip install -e .[test]; scripts/bootstrap.sh test)", module=True)
-if not chromium_available():
-    missing("Debian's chromium is not installed (scripts/install-test-tools.sh)", module=True)
+require_browser()
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 SPEED = 10.0  # simulated seconds per real second

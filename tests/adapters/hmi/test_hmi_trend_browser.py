@@ -17,14 +17,20 @@ from typing import Any
 import pytest
 import pytest_asyncio
 from hmi_supervisory_support import PLANT, start_supervisory_plant
-from hmi_support import Plant, browser, chromium_available, open_page, ready, screenshot_on_failure, wait_until  # noqa: F401 (browser: a fixture)
+from hmi_support import (  # noqa: F401 (browser: a fixture)
+    Plant,
+    browser,
+    open_page,
+    ready,
+    require_browser,
+    screenshot_on_failure,
+    wait_until,
+)
 
 from softplc.core.clock import SimClock
 from softplc.core.tags import Quality
 
-pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
-if not chromium_available():
-    pytest.skip("Debian's chromium is not installed (scripts/install-test-tools.sh)", allow_module_level=True)
+require_browser()
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 SPEED = 10.0  # simulated seconds per real second

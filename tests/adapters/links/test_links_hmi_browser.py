@@ -13,14 +13,20 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from hmi_support import ARTIFACTS, browser, chromium_available, open_page, ready, screenshot_on_failure, start_plant  # noqa: F401 (browser: a fixture)
+from hmi_support import (  # noqa: F401 (browser: a fixture)
+    ARTIFACTS,
+    browser,
+    open_page,
+    ready,
+    require_browser,
+    screenshot_on_failure,
+    start_plant,
+)
 
 from softplc.adapters.links.manifest import build
 from tests.links_support import PymodbusRemote
 
-pytest.importorskip("playwright.async_api", reason="the playwright package (pip install -e .[test])")
-if not chromium_available():
-    pytest.skip("Debian's chromium is not installed (scripts/install-test-tools.sh)", allow_module_level=True)
+require_browser()
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 

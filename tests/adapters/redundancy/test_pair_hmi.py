@@ -14,10 +14,11 @@ from softplc.app.runtime import Runtime
 from softplc.config import load_config
 from tests.adapters.redundancy.pair_support import free_port, write_pair
 from tests.adapters.redundancy.test_pair_inprocess import role, until
-from tests.hmi_support import ARTIFACTS, browser, chromium_available, open_page, screenshot_on_failure  # noqa: F401
+from tests.hmi_support import ARTIFACTS, browser, open_page, require_browser, screenshot_on_failure  # noqa: F401
 
-pytestmark = [pytest.mark.asyncio(loop_scope="module"),
-              pytest.mark.skipif(not chromium_available(), reason="Debian's chromium is not installed")]
+require_browser()
+
+pytestmark = pytest.mark.asyncio(loop_scope="module")
 
 SERVERS = """
 servers:

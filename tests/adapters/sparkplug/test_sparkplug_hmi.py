@@ -13,16 +13,17 @@ from softplc.protocols.mqtt_settings import MqttSettings
 from tests.hmi_support import (  # noqa: F401
     ARTIFACTS,
     browser,
-    chromium_available,
     open_page,
     plant_yaml,
     ready,
+    require_browser,
     screenshot_on_failure,
     start_plant,
 )
 
-pytestmark = [pytest.mark.skipif(not chromium_available(), reason="Chromium is not installed (scripts/install-test-tools.sh)"),
-              pytest.mark.asyncio(loop_scope="module")]
+require_browser()
+
+pytestmark = pytest.mark.asyncio(loop_scope="module")
 
 
 async def test_the_tasks_page_shows_the_edge_node_and_its_primary_host(browser: Any, mosquitto, tmp_path: Path) -> None:

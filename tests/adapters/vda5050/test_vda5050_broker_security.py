@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from conftest import REPO
 from mosquitto_server import MosquittoServer, MosquittoUnavailable, free_port
+from tools_support import missing
 from vda5050_support import MAP, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 from softplc.clients.robot_agent.vda5050.agent import VehicleAgent
@@ -64,7 +65,7 @@ def secured(tmp_path: Path):
     try:
         server = MosquittoServer(extra=config)
     except MosquittoUnavailable as error:
-        pytest.skip(str(error))
+        missing(str(error))
     server.start()
     try:
         yield server, tls_port, certs / "ca.pem"

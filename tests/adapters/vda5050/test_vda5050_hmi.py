@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import asyncio
 import functools
-import os
 from pathlib import Path
 
 import pytest
-from hmi_support import ARTIFACTS, browser, chromium_available, open_page, ready, screenshot_on_failure  # noqa: F401 (fixture)
+from hmi_support import ARTIFACTS, browser, open_page, ready, require_browser, screenshot_on_failure  # noqa: F401 (fixture)
 from vda5050_support import MAP, adapter, start_plant, vehicle_yaml, wait_for, write_plant
 
 from softplc.clients.robot_agent.vda5050.agent import VehicleAgent
@@ -21,15 +20,9 @@ from softplc.robotics.floor import Floor
 from softplc.robotics.gridmap import load_map
 from softplc.robotics.robots import load_robots
 
+require_browser()
+
 pytestmark = pytest.mark.asyncio(loop_scope="module")
-
-
-@pytest.fixture(autouse=True)
-def need_chromium() -> None:
-    if not chromium_available():
-        if os.environ.get("CI"):
-            pytest.fail("chromium is missing (scripts/install-test-tools.sh)")
-        pytest.skip("chromium is missing")
 
 
 @functools.cache
