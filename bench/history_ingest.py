@@ -33,18 +33,15 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from bench.flood_plant import flood_plant  # noqa: E402
 from bench.timing import load_average  # noqa: E402
 from softplc.util.durations import parse_duration  # noqa: E402
 
-SUPPORT = REPO / "tests" / "history_support.py"
-CORE = REPO / "tests" / "core_programs.py"
 GOAL_RATE = 50_000
 GOAL_P99_DELTA_MS = 0.2
 
 
 def plant(tags: int, interval: str, storage: str | None) -> str:
-    names = [f"v{index:05d}" for index in range(tags)]
-    declared = "\n".join(f"  {name}: {{type: float64}}" for name in names)
     history = f"""
 history:
   {storage}
@@ -52,26 +49,7 @@ history:
   record:
     - {{tags: ["v*"]}}
 """ if storage is not None else ""
-    return f"""
-version: 1
-plant: {{name: ingest}}
-tags:
-  probe_count: {{type: uint32}}
-  tick: {{type: uint32}}
-{declared}
-tasks:
-  probe:
-    interval: 10ms
-    priority: 0
-    programs:
-      - {{name: probe, program: "{CORE}:Counter", bind: {{count: probe_count}}}}
-  flood:
-    interval: {interval}
-    priority: 1
-    programs:
-      - {{name: flood, program: "{SUPPORT}:Flood", bind: {{tick: tick, values: [{", ".join(names)}]}}}}
-servers: {{opcua: {{enabled: false}}, modbus: {{enabled: false}}, hmi: {{enabled: false}}}}
-{history}"""
+    return flood_plant("ingest", tags, interval, history)
 
 
 async def measure(args: argparse.Namespace, state: Path) -> dict[str, float]:

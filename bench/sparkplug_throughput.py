@@ -31,18 +31,16 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from bench.flood_plant import flood_plant, tag_names  # noqa: E402
 from bench.timing import load_average  # noqa: E402
 
-SUPPORT = REPO / "tests" / "history_support.py"
-CORE = REPO / "tests" / "core_programs.py"
 GOAL_RATE = 50_000
 GOAL_P99_MS = 1.0
 GOAL_REBIRTH_S = 1.0
 
 
 def plant(tags: int, interval: str, devices: int, port: int, sparkplug: bool) -> str:
-    names = [f"v{index:05d}" for index in range(tags)]
-    declared = "\n".join(f"  {name}: {{type: float64}}" for name in names)
+    names = tag_names(tags)
     per_device = -(-tags // devices)
     device_list = "\n".join(f"    - {{id: d{number}, tags: [{', '.join(names[number * per_device:(number + 1) * per_device])}]}}"
                             for number in range(devices))
@@ -55,26 +53,7 @@ sparkplug:
   devices:
 {device_list}
 """ if sparkplug else ""
-    return f"""
-version: 1
-plant: {{name: sparkplug-bench}}
-tags:
-  probe_count: {{type: uint32}}
-  tick: {{type: uint32}}
-{declared}
-tasks:
-  probe:
-    interval: 10ms
-    priority: 0
-    programs:
-      - {{name: probe, program: "{CORE}:Counter", bind: {{count: probe_count}}}}
-  flood:
-    interval: {interval}
-    priority: 1
-    programs:
-      - {{name: flood, program: "{SUPPORT}:Flood", bind: {{tick: tick, values: [{", ".join(names)}]}}}}
-servers: {{opcua: {{enabled: false}}, modbus: {{enabled: false}}, hmi: {{enabled: false}}}}
-{section}"""
+    return flood_plant("sparkplug-bench", tags, interval, section)
 
 
 SUBSCRIBER = """
