@@ -121,11 +121,12 @@ class Writer:
 
     def start(self, first: int) -> None:
         self.next = first
+        self._stopping = False
         self._task = asyncio.ensure_future(self._run())
 
     async def _run(self) -> None:
         names = list(self.observer.pair.members)
-        while True:
+        while not self._stopping:
             for name in names:
                 status = await self.observer.write(name, "spare", self.next)
                 self.statuses[status] = self.statuses.get(status, 0) + 1
@@ -137,9 +138,12 @@ class Writer:
             await asyncio.sleep(0.01)
 
     async def stop(self) -> None:
+        # A flag besides the cancel: asyncua's request to a member being killed can swallow the
+        # CancelledError, and the loop then wrote on for ever (seen: the suite hung here).
         assert self._task is not None
+        self._stopping = True
         self._task.cancel()
-        await asyncio.gather(self._task, return_exceptions=True)
+        await asyncio.wait({self._task}, timeout=5)
 
 
 @pytest_asyncio.fixture(scope="module", loop_scope="module")
