@@ -42,6 +42,9 @@ class _Runtime(Protocol):
 
     def spawn(self, coroutine: Coroutine[Any, Any, Any], name: str) -> asyncio.Task[Any]: ...
 
+    def add_replicated_part(self, name: str, capture: Callable[[bool], Any], check: Callable[[Any], Any],
+                            apply: Callable[[Any], None]) -> Callable[[], None]: ...
+
 
 class RuntimePlant:
     """A `Plant` over one runtime: its tags, commands, events, clock and state directory, and nothing else."""
@@ -80,8 +83,12 @@ class RuntimePlant:
     def spawn(self, coroutine: Coroutine[Any, Any, Any], name: str) -> asyncio.Task[Any]:
         return self._runtime.spawn(coroutine, name)
 
-    def after_cycle(self, callback: Callable[[TaskView], None]) -> Callable[[], None]:
-        return self._runtime.engine.after_cycle(callback)
+    def after_cycle(self, callback: Callable[[TaskView], None], *, last: bool = False) -> Callable[[], None]:
+        return self._runtime.engine.after_cycle(callback, last=last)
+
+    def replicate(self, name: str, capture: Callable[[bool], Any], check: Callable[[Any], Any],
+                  apply: Callable[[Any], None]) -> Callable[[], None]:
+        return self._runtime.add_replicated_part(name, capture, check, apply)
 
     def until_release(self) -> float | None:
         tasks = self._runtime.engine.tasks

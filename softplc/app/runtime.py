@@ -85,6 +85,7 @@ class Runtime:
         self.engine = ScanEngine(self.clock, self.db, self.tasks)
         self.engine.role = self.role
         self._replication: Any = None
+        self._replicated_parts: dict[str, Any] = {}  # adapters' parts (Plant.replicate), handed to the replication when made
         self.engine.after_cycle(self._after_cycle)
         self.system_tags = SystemTags(self.db, self.engine, self._state_for_tags, self.reset_faults)
         self.commands = Commands(self.clock.wall)
@@ -150,8 +151,17 @@ class Runtime:
             from softplc.engine.replication import Replication
             from softplc.engine.replication_wire import ReplicationDoor
 
-            self._replication = ReplicationDoor(Replication(self.db, self.tasks, self.program_clock, self.clock))
+            self._replication = ReplicationDoor(Replication(self.db, self.tasks, self.program_clock, self.clock, self._replicated_parts))
         return self._replication
+
+    def add_replicated_part(self, name: str, capture: Callable[[bool], Any], check: Callable[[Any], Any],
+                            apply: Callable[[Any], None]) -> Callable[[], None]:
+        """An adapter's own state for a standby (`Plant.replicate`); kept aside until a redundant pair makes the replication."""
+        from softplc.engine.replication import Part
+
+        part = Part(capture, check, apply)
+        self._replicated_parts[name] = part
+        return lambda: self._replicated_parts.pop(name, None) if self._replicated_parts.get(name) is part else None
 
     @property
     def stopping(self) -> bool:

@@ -118,8 +118,9 @@ class StateReplication(Protocol):
         """This standby becomes active: resume the active's write journal; returns the writes resumed."""
         ...
 
-    def add_part(self, name: str, capture: Callable[[bool], Any], apply: Callable[[Any], None]) -> Callable[[], None]:
-        """Replicate an adapter's state too: `capture(full)` (None: unchanged), `apply(state)`; returns an undo."""
+    def add_part(self, name: str, capture: Callable[[bool], Any], check: Callable[[Any], Any],
+                 apply: Callable[[Any], None]) -> Callable[[], None]:
+        """Replicate an adapter's state too (see `Plant.replicate`); returns an undo."""
         ...
 
 
@@ -154,8 +155,22 @@ class Plant(Protocol):
         """Run a background coroutine for the plant's lifetime; its crash is logged, not lost."""
         ...
 
-    def after_cycle(self, callback: Callable[[TaskView], None]) -> Callable[[], None]:
-        """Call `callback(task)` at every scan boundary, after the task's outputs are committed; returns an undo."""
+    def after_cycle(self, callback: Callable[[TaskView], None], *, last: bool = False) -> Callable[[], None]:
+        """Call `callback(task)` at every scan boundary, after the task's outputs are committed; returns an undo.
+
+        `last`: after every other adapter's callback (a redundant pair captures what they left at the boundary).
+        """
+        ...
+
+    def replicate(self, name: str, capture: Callable[[bool], Any], check: Callable[[Any], Any],
+                  apply: Callable[[Any], None]) -> Callable[[], None]:
+        """In a redundant pair, send an adapter's own state (e.g. the alarms') with the plant's at each boundary; returns an undo.
+
+        On the active `capture(full)` returns the part's plain data (lists, numbers, text; None:
+        unchanged since the previous capture). On the standby `check(data)` validates what came
+        (raising StateRefused: then nothing of that whole state is applied) and returns what
+        `apply` takes. A plant alone never calls them.
+        """
         ...
 
     def until_release(self) -> float | None:

@@ -71,15 +71,20 @@ class CycleState:
 
 
 @dataclass
-class _Part:
-    capture: Callable[[bool], Any]  # (full) -> the part's state, None when unchanged
+class Part:
+    """An adapter's own state replicated with the plant's (`Plant.replicate`)."""
+
+    capture: Callable[[bool], Any]  # (full) -> the part's plain state, None when unchanged
+    check: Callable[[Any], Any]  # the plain state -> what `apply` takes; raises StateRefused
     apply: Callable[[Any], None]
 
 
 class Replication:
     """Captures (active) and applies (standby) a plant's state; holds the journal a standby may have to resume."""
 
-    def __init__(self, db: TagDatabase, tasks: Sequence[Task], program_clock: PlantTime, engine_clock: Clock) -> None:
+    def __init__(self, db: TagDatabase, tasks: Sequence[Task], program_clock: PlantTime, engine_clock: Clock,
+                 parts: dict[str, Part] | None = None) -> None:
+        """`parts`: the adapters' parts by name, shared with whoever registers them (the runtime)."""
         self.db = db
         self.tasks = tasks
         self.program_clock = program_clock
@@ -90,7 +95,7 @@ class Replication:
         self._changed: dict[str, Tag] = {}
         self._forces_seen = -1
         self._last_state: dict[str, bytes] = {}
-        self._parts: dict[str, _Part] = {}
+        self._parts: dict[str, Part] = parts if parts is not None else {}
         self._held: list[tuple[int, Write | ForceChange]] = []  # journal entries of the active, not yet applied there
         self.journal_position: int | None = None  # the active's applied position in the last state applied
         db.on_change(self._note_changed)
@@ -99,10 +104,12 @@ class Replication:
     def programs(self) -> dict[str, ProgramInstance]:
         return {instance.name: instance for task in self.tasks for instance in task.programs}
 
-    def add_part(self, name: str, capture: Callable[[bool], Any], apply: Callable[[Any], None]) -> Callable[[], None]:
-        """Replicate an adapter's own state too: `capture(full)` returns it (None: unchanged), `apply(state)` takes it."""
-        self._parts[name] = _Part(capture, apply)
-        return lambda: self._parts.pop(name, None)
+    def add_part(self, name: str, capture: Callable[[bool], Any], check: Callable[[Any], Any],
+                 apply: Callable[[Any], None]) -> Callable[[], None]:
+        """Replicate an adapter's own state too (`Plant.replicate`): capture on the active, check then apply on the standby."""
+        part = Part(capture, check, apply)
+        self._parts[name] = part
+        return lambda: self._parts.pop(name, None) if self._parts.get(name) is part else None
 
     def _note_changed(self, tags: Sequence[Tag]) -> None:
         changed = self._changed
@@ -182,9 +189,10 @@ class Replication:
         self.check(state)
         programs = self.programs
         packages = packages if packages is not None else self.program_packages()
-        # Unpickled first: a refused program state leaves everything as it was.
+        # Unpickled and checked first: a refused program state or part leaves everything as it was.
         loaded = {image.name: load_state(image.state, self.program_clock, packages) for image in state.programs
                   if image.state is not None}
+        parts = {name: self._parts[name].check(part_state) for name, part_state in state.parts.items()}
         db = self.db
         if state.full:
             db.discard_journal()
@@ -201,8 +209,8 @@ class Replication:
             instance.error, instance.faults, instance.restarts, instance.version = image.error, image.faults, image.restarts, image.version
             instance._retry_at = now + image.retry_in if image.retry_in is not None else float("inf")  # noqa: SLF001
             instance._reaction_due = False  # noqa: SLF001 - the active committed its reaction already
-        for name, part_state in state.parts.items():
-            self._parts[name].apply(part_state)
+        for name, checked in parts.items():
+            self._parts[name].apply(checked)
         self.sequence = state.sequence
         self.applied += 1
         self._changed.clear()

@@ -7,6 +7,7 @@ journal entry raises `StateRefused` with the reason and changes nothing.
 
     ["state", sequence, full, task, time, journal, tags, forces, programs, parts]
         tags:     [[name, value, quality, timestamp], ...]
+        parts:    {name: the part's own plain data}  (each checked by its adapter: `Plant.replicate`)
         forces:   None (unchanged) | [[tag, value, origin, since, previous], ...]
         programs: [[name, status, error, faults, restarts, version, retry_in | None, state bytes | None], ...]
     ["journal", position, [["w", tag, value, quality, origin] | ["f", tag, force, value, origin | None, since, restore], ...]]
@@ -83,8 +84,9 @@ class ReplicationDoor:
     def take_over(self) -> int:
         return self.replication.take_over()
 
-    def add_part(self, name: str, capture: Callable[[bool], Any], apply: Callable[[Any], None]) -> Callable[[], None]:
-        return self.replication.add_part(name, capture, apply)
+    def add_part(self, name: str, capture: Callable[[bool], Any], check: Callable[[Any], Any],
+                 apply: Callable[[Any], None]) -> Callable[[], None]:
+        return self.replication.add_part(name, capture, check, apply)
 
 
 # -- to the wire ---------------------------------------------------------------------------

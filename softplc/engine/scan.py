@@ -174,6 +174,7 @@ class ScanEngine:
         self.tasks = sorted(tasks, key=lambda task: task.priority)
         self.current: CurrentScan | None = None
         self._after_cycle: list[Callable[[Task], None]] = []
+        self._last_after_cycle = 0  # the callbacks at the end of _after_cycle registered `last`
         self._stopping = False
         self.role: RoleHolder | None = None  # None: alone, always active
         self.passed = 0  # releases passed without a cycle (not active)
@@ -182,10 +183,24 @@ class ScanEngine:
         """Whether cycles run now (alone, or the active of a redundant pair)."""
         return self.role is None or self.role.is_active()
 
-    def after_cycle(self, callback: Callable[[Task], None]) -> Callable[[], None]:
-        """Call `callback(task)` after every cycle (e.g. to evaluate a stop condition); returns an undo."""
-        self._after_cycle.append(callback)
-        return lambda: self._after_cycle.remove(callback) if callback in self._after_cycle else None
+    def after_cycle(self, callback: Callable[[Task], None], *, last: bool = False) -> Callable[[], None]:
+        """Call `callback(task)` after every cycle (e.g. to evaluate a stop condition); returns an undo.
+
+        `last`: after every other callback, whenever registered (a capture of the state the others left).
+        """
+        if last:
+            self._last_after_cycle += 1
+            self._after_cycle.append(callback)
+        else:
+            self._after_cycle.insert(len(self._after_cycle) - self._last_after_cycle, callback)
+
+        def undo() -> None:
+            if callback in self._after_cycle:
+                if self._after_cycle.index(callback) >= len(self._after_cycle) - self._last_after_cycle:
+                    self._last_after_cycle -= 1
+                self._after_cycle.remove(callback)
+
+        return undo
 
     def stop(self) -> None:
         self._stopping = True

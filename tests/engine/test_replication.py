@@ -97,7 +97,7 @@ class Pair:
         self.sent = 0
         active = self.active.plant.replication
         active.on_journal(self._journal)
-        self.active.plant.after_cycle(self._cycle)
+        self.active.plant.after_cycle(self._cycle, last=True)
         self._send(active.capture_full())
 
     def _send(self, state: Any) -> None:

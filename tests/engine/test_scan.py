@@ -277,3 +277,24 @@ async def test_tasks_due_at_the_same_time_run_in_priority_order(sim_runtime) -> 
     assert by_time[0.04] == ["high", "middle", "low"]
     assert by_time[0.01] == ["high"]
     assert len(by_time) == 20
+
+
+def test_a_callback_registered_last_runs_after_every_other_whenever_they_were_registered(sim_runtime) -> None:
+    # A redundant pair captures the state at a boundary after every adapter's work there (the
+    # alarms evaluated on that cycle's tags), though it registers first.
+    engine = sim_runtime("version: 1\ntags:\n  x: {type: int32}\n").engine
+    calls: list[str] = []
+    undo_capture = engine.after_cycle(lambda task: calls.append("capture"), last=True)
+    engine.after_cycle(lambda task: calls.append("alarms"))
+    undo_history = engine.after_cycle(lambda task: calls.append("history"))
+    engine.after_cycle(lambda task: calls.append("final"), last=True)
+    for callback in engine._after_cycle:  # noqa: SLF001 - the order the engine calls them in
+        callback(None)
+    assert calls == ["alarms", "history", "capture", "final"]
+    undo_history()
+    undo_capture()
+    engine.after_cycle(lambda task: calls.append("late"))
+    calls.clear()
+    for callback in engine._after_cycle:  # noqa: SLF001
+        callback(None)
+    assert calls == ["alarms", "late", "final"]

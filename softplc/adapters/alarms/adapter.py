@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 from softplc.adapters.alarms.actions import AlarmActions
 from softplc.adapters.alarms.commands import register_alarm_commands
 from softplc.adapters.alarms.engine import AlarmEngine
+from softplc.adapters.alarms.replication import AlarmReplica
 from softplc.adapters.alarms.settings import AlarmSettings
 from softplc.adapters.alarms.summary import SummaryTags
 from softplc.core.tagdb import Origin
@@ -47,6 +48,7 @@ class AlarmsAdapter:
         self._summary: SummaryTags | None = None
         self._undo: list[Callable[[], None]] = []
         self._running = False
+        self._plant: Plant | None = None
 
     async def start(self, plant: Plant) -> None:
         engine = AlarmEngine(self.settings, plant.tags, plant.clock, plant.events.publish)
@@ -63,6 +65,11 @@ class AlarmsAdapter:
         self._summary = SummaryTags(plant.tags, acknowledge_all)
         undo.append(plant.tags.on_change(engine.note_changed))
         undo.append(plant.tags.on_write(self._summary.note_writes))
+        # In a redundant pair the states travel to the standby, which takes them as they are
+        # (docs/redundancy.md): a successor goes on with them instead of annunciating anew.
+        replica = AlarmReplica(engine)
+        undo.append(plant.replicate("alarms", replica.capture, replica.check, lambda checked: self._mirror(replica, checked)))
+        self._plant = plant
         self._running = True
         if plant.tasks:
             undo.append(plant.after_cycle(self._after_cycle))
@@ -91,6 +98,15 @@ class AlarmsAdapter:
         if self._running:
             self.evaluate()
 
+    def _mirror(self, replica: AlarmReplica, checked: Any) -> None:
+        """A standby takes the active's alarm states, and shows their counts in its summary tags."""
+        replica.apply(checked)
+        engine, summary = self.engine, self._summary
+        if engine is not None and summary is not None and engine.changed:
+            engine.changed = False
+            summary.publish(engine.active_count, engine.unacknowledged_count, engine.highest_active_priority, engine.shelved_count,
+                            engine.flood.rate, engine.flood.flooding)
+
     def evaluate(self) -> None:
         """Evaluate the alarms and refresh the summary tags (at a scan boundary)."""
         engine = self.engine
@@ -106,7 +122,8 @@ class AlarmsAdapter:
     async def _tick(self, plant: Plant) -> None:
         while self._running:
             await plant.clock.sleep(IDLE_TICK)
-            self.evaluate()
+            if plant.role.is_active():  # a standby evaluates nothing: it takes the active's states
+                self.evaluate()
 
     async def stop(self) -> None:
         self._running = False

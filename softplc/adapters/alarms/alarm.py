@@ -21,7 +21,7 @@ class Alarm:
     __slots__ = ("index", "definition", "check", "suppress", "plain", "fast", "watched", "low_edge", "high_edge", "alarm_values", "holds",
                  "level", "priority_level", "priority", "rank", "severity", "level_limit", "levels", "template", "constant",
                  "active", "pending_due", "delay_generation", "annunciation",
-                 "shelving", "shelve_generation", "suppressed", "out_of_service", "since", "active_since", "last_transition",
+                 "shelving", "shelve_generation", "shelve_due", "suppressed", "out_of_service", "since", "active_since", "last_transition",
                  "sequence", "message", "value", "comment", "comment_user")
 
     def __init__(self, index: int, definition: AlarmDefinition, check: Check, suppress: Callable[[], object] | None) -> None:
@@ -65,6 +65,7 @@ class Alarm:
         self.annunciation = AlarmState.NORMAL
         self.shelving: Shelving | None = None
         self.shelve_generation = 0
+        self.shelve_due: float | None = None  # clock time the current shelving expires (its timer)
         self.suppressed = False
         self.out_of_service = False
         self.since = 0.0

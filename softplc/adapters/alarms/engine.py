@@ -77,6 +77,9 @@ class AlarmEngine:
         self.shelved_count = 0
         self._active_ranks = [0] * 5  # active alarms per priority rank (1..4)
         self.changed = False  # a transition since the summary last looked
+        # Alarms whose state changed since a redundant pair's last capture (replication.py): each
+        # transition, delay started or ended, shelving scheduled, counting window moved.
+        self.touched: set[int] = set()
         self.evaluations = 0
         self.flood = FloodWatch()
 
@@ -156,6 +159,7 @@ class AlarmEngine:
         if raw is None:
             raw = alarm.check(level, now)
         if isinstance(alarm.check, IncreaseCheck):
+            self.touched.add(alarm.index)  # its counting window moves
             due = alarm.check.next_change(now)
             if due is not None:
                 self._push(due, alarm, -1, _WINDOW)
@@ -163,6 +167,7 @@ class AlarmEngine:
             if alarm.pending_due is not None:  # the condition flipped back before its delay ran out
                 alarm.pending_due = None
                 alarm.delay_generation += 1
+                self.touched.add(alarm.index)
             return
         if level and raw:  # still active, at another limit: no delay
             self._change_level(alarm, raw)
@@ -170,9 +175,7 @@ class AlarmEngine:
         delay = definition.off_delay if level else definition.on_delay
         if delay > 0:
             if alarm.pending_due is None:
-                alarm.pending_due = now + delay
-                alarm.delay_generation += 1
-                self._push(alarm.pending_due, alarm, alarm.delay_generation, _DELAY)
+                self.schedule_delay(alarm, now + delay)
                 return
             if now < alarm.pending_due:
                 return
@@ -307,6 +310,7 @@ class AlarmEngine:
         """Publish one transition or action of `alarm` as an `alarm` event."""
         alarm.sequence += 1
         alarm.last_transition = transition._value_
+        self.touched.add(alarm.index)
         now = self.clock.wall()
         if transition is not Transition.COMMENTED:  # a comment changes no state
             alarm.since = now
@@ -339,7 +343,29 @@ class AlarmEngine:
     def schedule_shelving(self, alarm: Alarm, due: float) -> None:
         """Expire `alarm`'s current shelving at clock time `due`."""
         alarm.shelve_generation += 1
+        alarm.shelve_due = due
+        self.touched.add(alarm.index)
         self._push(due, alarm, alarm.shelve_generation, _SHELVE)
+
+    def schedule_delay(self, alarm: Alarm, due: float | None) -> None:
+        """Run `alarm`'s on/off delay until clock time `due` (None: no delay runs)."""
+        alarm.pending_due = due
+        alarm.delay_generation += 1
+        self.touched.add(alarm.index)
+        if due is not None:
+            self._push(due, alarm, alarm.delay_generation, _DELAY)
+
+    def prune_timers(self) -> None:
+        """Drop the timers of shelvings and delays replaced since (a standby's heap never fires, only grows)."""
+        alarms = self.alarms
+        self._timers = [timer for timer in self._timers
+                        if timer[4] == _WINDOW or timer[3] == (alarms[timer[2]].shelve_generation if timer[4] == _SHELVE
+                                                               else alarms[timer[2]].delay_generation)]
+        heapq.heapify(self._timers)
+
+    @property
+    def timers(self) -> int:
+        return len(self._timers)
 
 
 def _alarms(count: int) -> str:

@@ -23,6 +23,7 @@ from softplc.adapters.history.queries import HistoryReader
 from softplc.adapters.history.settings import HistorySettings, TagPolicy
 from softplc.adapters.history.store import SINK_NAME, HistorySink, TagInfo
 from softplc.adapters.history.swinging_door import SwingingDoor
+from softplc.core.plant_role import RoleTerm
 from softplc.core.tags import Quality, Tag
 from softplc.storage import BatchWriter, Database, StorageSettings, remove_sqlite_store
 from softplc.storage.process import ProcessWriter
@@ -121,6 +122,8 @@ class HistoryRecorder:
         self._plant: Plant | None = None
         self._reader: HistoryReader | None = None
         self._unregister: Any = None
+        self._undo_role: Any = None
+        self._recording = True  # this member is active: it records (a standby of a redundant pair does not)
 
     async def start(self, plant: Plant) -> None:
         from softplc.core.plant import AdapterError
@@ -164,6 +167,8 @@ class HistoryRecorder:
                         for name, policy in self.policies.items() if name in db}
         self._changed([db[name] for name in self.filters])  # the starting values
         self._unsubscribe = db.on_change(self._changed)
+        self._recording = plant.role.is_active()
+        self._undo_role = plant.role.on_change(self._role_changed)
         if any(f.door is not None and math.isfinite(f.door.max_interval) for f in self.filters.values()):
             plant.spawn(self._heartbeats(), "history-heartbeat")
 
@@ -171,6 +176,9 @@ class HistoryRecorder:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
+        if self._undo_role is not None:
+            self._undo_role()
+            self._undo_role = None
         if self._unregister is not None:
             self._unregister()
             self._unregister = None
@@ -181,15 +189,17 @@ class HistoryRecorder:
         if writer is None:
             return
         rows: list[Row] = []
-        for tag_filter in self.filters.values():
-            rows += tag_filter.release()
-        # The end of recording: a BAD sample without a value for every tag (as PI's shutdown
-        # events), so a reader knows nothing was recorded until the next run — a trend draws a
-        # gap over the outage, not a line across it.
         assert self._plant is not None
-        end = max([self._plant.clock.wall(), *(row[1] for row in rows)])
-        rows += [(name, end, math.nan, QUALITY_CODES[Quality.BAD]) for name in self.filters]
-        writer.put(SINK_NAME, rows)
+        if self._recording and self._plant.role.is_active():
+            for tag_filter in self.filters.values():
+                rows += tag_filter.release()
+            # The end of recording: a BAD sample without a value for every tag (as PI's shutdown
+            # events), so a reader knows nothing was recorded until the next run — a trend draws a
+            # gap over the outage, not a line across it. Not from a standby: the active records on.
+            end = max([self._plant.clock.wall(), *(row[1] for row in rows)])
+            rows += [(name, end, math.nan, QUALITY_CODES[Quality.BAD]) for name in self.filters]
+        if rows:
+            writer.put(SINK_NAME, rows)
         await self._plant.clock.run_blocking(writer.stop)
         self.writer = None
 
@@ -213,6 +223,38 @@ class HistoryRecorder:
         return self.writer.flush(timeout) if self.writer is not None else False
 
     # -- internals ------------------------------------------------------------------------
+
+    def _role_changed(self, term: RoleTerm) -> None:
+        """A member of a redundant pair that becomes active records every tag's value now, as at a start.
+
+        The old active may have ended its recording with BAD samples (a clean stop): a tag that does
+        not change after the takeover would read BAD until it did.
+        """
+        plant = self._plant
+        if plant is None:
+            return
+        active = plant.role.is_active()
+        if active and not self._recording:
+            self._recording = True
+            now = plant.clock.wall()
+            rows: list[Row] = []
+            db = plant.tags
+            for name, tag_filter in list(self.filters.items()):
+                fresh = TagFilter(name, self.policies[name], tag_filter.numeric)  # what it held as a standby is stale
+                self.filters[name] = fresh
+                tag = db[name]
+                rows += fresh.offer(now, tag.value, tag.quality)
+            self._scheduled.clear()
+            self._due.clear()
+            for name, tag_filter in self.filters.items():
+                door = tag_filter.door
+                if door is not None and door.archived is not None and math.isfinite(door.max_interval):
+                    self._scheduled.add(name)
+                    heapq.heappush(self._due, (door.archived[0] + door.max_interval, name))
+            if rows and self.writer is not None:
+                self.writer.put(SINK_NAME, rows)
+        elif not active:
+            self._recording = False
 
     def _changed(self, tags: Sequence[Tag]) -> None:
         role = self._plant.tags.role if self._plant is not None else None
@@ -240,6 +282,8 @@ class HistoryRecorder:
         while True:
             await clock.sleep(HEARTBEAT_TICK)
             now = clock.wall()
+            if not self._recording:
+                continue  # a standby repeats nothing: the active records
             rows: list[Row] = []
             due = self._due
             while due and due[0][0] <= now:

@@ -104,7 +104,7 @@ class RedundancyAdapter:
             raise AdapterError(f"redundancy: cannot listen for the sync link on {host}:{port}: {error.strerror or error}") from None
         replication = plant.replication
         self._undo.append(replication.on_journal(self.server.send_journal))
-        self._undo.append(plant.after_cycle(self._after_cycle))
+        self._undo.append(plant.after_cycle(self._after_cycle, last=True))  # what every adapter left at the boundary
         commands = plant.commands
         self._undo.append(commands.register("redundancy.status", lambda arguments, origin: self.status(), permission=Permission.VIEW,
                                             description="the redundant pair's state"))

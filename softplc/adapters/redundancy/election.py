@@ -33,6 +33,7 @@ RedundancyAdapter = Any
 log = logging.getLogger(__name__)
 
 RECONNECT = 0.2  # s between two attempts to reach the active's sync link
+STARTING_POLL = 0.05  # s between two looks at whether this runtime has started all its adapters
 STARTUP_GRACE = 5.0  # s the non-preferred member waits at start-up before it campaigns
 
 
@@ -95,6 +96,11 @@ async def stand_by(adapter: RedundancyAdapter, grace: float = 0.0) -> None:
 async def follow(adapter: RedundancyAdapter, active: str) -> None:
     """Keep a sync link to the active open, reconnecting; a refusal is reported and retried."""
     peer = adapter.settings.peer
+    plant = adapter.plant
+    # Not before every adapter of this runtime has started: a state carries the adapters' parts
+    # (the alarms'), and one arriving before its adapter registered it would be refused as unknown.
+    while plant.state == "STARTING":
+        await plant.clock.sleep(STARTING_POLL)
     while True:
         client = SyncClient(adapter, adapter.client_context, adapter.peer_fingerprint, peer.sync_address, active)
         try:

@@ -27,6 +27,7 @@ tasks:
         program: tests.engine.replication_programs:Stateful
         bind: {{part: part, scans: scans, edges: edges, done: done, draw: draw}}
 {servers}
+{extra}
 redundancy:
   preferred: a
   members:
@@ -51,16 +52,20 @@ def free_port() -> int:
 
 
 def write_pair(folder: Path, etcd: str, *, servers: str = NO_SERVERS, interval: str = "10ms", ports: dict[str, int] | None = None,
-               proxies: dict[str, int] | None = None) -> Path:
-    """Make pair/a.*, pair/b.* and tagdb.yaml in `folder`; `proxies`: member → the port the peer reaches it at (a proxy)."""
+               proxies: dict[str, int] | None = None, extra: str = "") -> Path:
+    """Make pair/a.*, pair/b.* and tagdb.yaml in `folder`; `proxies`: member → the port the peer reaches it at (a proxy).
+
+    `extra`: more top-level sections (history, alarms, audit...), YAML at the left margin.
+    """
     make_pair(folder / "pair", "a", "pairtest")
     make_pair(folder / "pair", "b", "pairtest")
     ports = ports or {}
     listen = {member: ports.get(f"sync_{member}") or free_port() for member in "ab"}
     sync = {member: (proxies or {}).get(member, listen[member]) for member in "ab"}
-    text = PLANT.format(interval=interval, servers=servers, etcd=etcd, listen_a=listen["a"], listen_b=listen["b"],
-                        sync_a=sync["a"], sync_b=sync["b"], opcua_a=ports.get("opcua_a_url", ""), opcua_b=ports.get("opcua_b_url", ""),
-                        hmi_a=ports.get("hmi_a_url", ""), hmi_b=ports.get("hmi_b_url", ""))
+    text = textwrap.dedent(PLANT).format(
+        interval=interval, servers=textwrap.dedent(servers), extra=textwrap.dedent(extra), etcd=etcd, listen_a=listen["a"], listen_b=listen["b"],
+        sync_a=sync["a"], sync_b=sync["b"], opcua_a=ports.get("opcua_a_url", ""), opcua_b=ports.get("opcua_b_url", ""),
+        hmi_a=ports.get("hmi_a_url", ""), hmi_b=ports.get("hmi_b_url", ""))
     path = folder / "tagdb.yaml"
-    path.write_text(textwrap.dedent(text))
+    path.write_text(text)
     return path
