@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # the test modules' own imports (tools_support)
 
 from tests.adapters.redundancy.pair_process import Pair  # noqa: E402
 from tests.adapters.redundancy.test_pair_faults import Observer, Writer  # noqa: E402
