@@ -159,6 +159,13 @@ class Program:
         device with it, so the device can ignore an older active of a redundant pair (docs/redundancy.md)."""
         return self.plant_role.epoch if self.plant_role is not None else 0
 
+    @property
+    def driving(self) -> bool:
+        """Whether this plant may drive outputs right now (always, alone; in a redundant pair, only while
+        its active term holds). Ask it immediately before a command leaves the plant: a process frozen in
+        the middle of a scan wakes up in that scan, past its term, while the standby drives (docs/redundancy.md)."""
+        return self.plant_role is None or self.plant_role.is_active()
+
     def setup(self) -> None:
         """Called once before the first scan, and again after a restart."""
 

@@ -97,3 +97,38 @@ async def test_a_standby_refuses_actions_naming_the_active_but_answers_queries()
     assert calls[-1].accepted is False
     assert await commands.call("plant.look", {}, OPERATOR) == "seen"
     assert await commands.call("pair.switch", {}, Origin("cli", "erin", role=Role.ENGINEER)) == "switched"
+
+
+def test_a_program_asks_whether_it_may_drive_at_the_moment_it_sends() -> None:
+    """A process frozen in the middle of a scan wakes up in that scan, past its term: `driving` says so there."""
+    from softplc.core.program import Program, ProgramContext
+
+    now = [0.0]
+    holder = RoleHolder(lambda: now[0])
+    holder.set(RoleTerm(PlantRole.ACTIVE, 5, until=1.0, active="a"))
+    program = Program(ProgramContext("out", SimClock(), {}, plant_role=holder))
+    alone = Program(ProgramContext("alone", SimClock(), {}))
+    assert program.driving and program.epoch == 5 and alone.driving and alone.epoch == 0
+    now[0] = 1.0  # the scan began before the term's end; the freeze ended after it
+    assert not program.driving and program.epoch == 5
+    holder.set(RoleTerm(PlantRole.STANDBY, 6, active="b"))
+    assert not program.driving
+
+
+def test_a_standby_sets_its_own_diagnostic_tags_at_once_and_refuses_a_drivers_plant_tags() -> None:
+    """A standby runs no cycle: an adapter's `_sys.` status (never mirrored) is set at once; plant tags are the active's."""
+    from softplc.core.datatypes import DataType
+    from softplc.core.tagdb import TagDatabase
+    from softplc.core.tags import Access, TagDef
+
+    db = TagDatabase([TagDef("setpoint", DataType.FLOAT64, 0.0),
+                      TagDef("_sys.link.state", DataType.STRING, "", access=Access.RO, group="_sys", runtime_only=True)], lambda: 0.0)
+    db.role = RoleHolder(lambda: 0.0)
+    db.role.set(RoleTerm(PlantRole.STANDBY, 2, active="a", detail="write to the active, a"))
+    driver = Origin("links", role=None)
+    results = db.submit([("_sys.link.state", "up"), ("setpoint", 2.0), ("_sys.link.state", 7)], driver)
+    assert results[0] is None and db.value("_sys.link.state") == "up"
+    assert results[1] is not None and results[1].rule is Rule.NOT_ACTIVE and db.value("setpoint") == 0.0
+    assert results[2] is not None and results[2].rule is Rule.TYPE_MISMATCH  # checked like any write
+    (refused,) = db.submit([("_sys.link.state", "down")], OPERATOR)  # a client never writes a diagnostic tag
+    assert refused is not None and db.value("_sys.link.state") == "up"

@@ -24,6 +24,8 @@ class EpochOutput(Program):
         if sender is None:
             sender = _SOCKETS[self.port] = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         message = f"{os.getpid()} {self.epoch} {self.scans} {time.monotonic():.6f}".encode()
+        if not self.driving:
+            return  # frozen in this scan and woken past its term: the standby drives now
         try:
             sender.sendto(message, ("127.0.0.1", self.port))
         except OSError:
