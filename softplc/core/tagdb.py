@@ -181,9 +181,7 @@ class TagDatabase:
         items = list(items)
         role = origin.role
         if role is None and self.role is not None and not self.role.is_active():
-            # A driver's write on a standby: the active's image is what counts here.
-            refusal = self.role.refusal()
-            return [WriteRejected(name, Rule.NOT_ACTIVE, refusal) for name, _ in items]
+            return self._submit_on_standby(items)
         accepted: list[Write] = []
         results: list[WriteRejected | None] = []
         for name, value in items:
@@ -211,6 +209,27 @@ class TagDatabase:
                     events.append(WriteEvent(now, origin, name, old, value, result.rule, result.detail))
             self._report(events)
         self._add_to_journal(accepted)
+        return results
+
+    def _submit_on_standby(self, items: list[tuple[str, Any]]) -> list[WriteRejected | None]:
+        """A driver's write on a standby: the active's image is what counts here, except this runtime's own
+        diagnostic tags (`_sys.`, never mirrored), which are set at once — a standby runs no cycle to apply them."""
+        refusal = self.role.refusal() if self.role is not None else ""
+        results: list[WriteRejected | None] = []
+        own: dict[str, Any] = {}
+        for name, value in items:
+            tag = self._tags.get(name)
+            if tag is None or not tag.definition.runtime_only or value is KEEP_VALUE:
+                results.append(WriteRejected(name, Rule.NOT_ACTIVE, refusal))
+                continue
+            try:
+                own[name] = self.validate(name, value, role=None)
+            except WriteRejected as rejected:
+                results.append(rejected)
+                continue
+            results.append(None)
+        if own:
+            self.commit(own)
         return results
 
     def refused(self, origin: Origin | str, name: str, value: Any, rule: Rule, detail: str) -> WriteRejected:

@@ -217,9 +217,9 @@ class Replication:
         self._held = [(position, entry) for position, entry in self._held if position >= state.journal]
         self.journal_position = state.journal
 
-    def hold(self, position: int, entries: Sequence[Write | ForceChange]) -> None:
-        """Keep the active's journal entries from `position` on until a state says they were applied there."""
-        self._held.extend((position + offset, entry) for offset, entry in enumerate(entries))
+    def hold(self, position: int, entries: Sequence[Write | ForceChange | None]) -> None:
+        """Keep the active's journal entries from `position` on until a state says they were applied there (None: a skipped place)."""
+        self._held.extend((position + offset, entry) for offset, entry in enumerate(entries) if entry is not None)
 
     @property
     def held(self) -> int:

@@ -74,8 +74,14 @@ class ReplicationDoor:
         return journal_to_wire(self.db.applied_position, self.db.pending())
 
     def on_journal(self, callback: Callable[[list[Any]], None]) -> Callable[[], None]:
-        """Call `callback(journal_message)` for every batch entering the write journal (before the writer is answered)."""
-        return self.db.on_journal(lambda position, entries: callback(journal_to_wire(position, entries)))
+        """Call `callback(journal_message)` for every batch entering the write journal (before the writer is answered).
+
+        A batch of this runtime's own `_sys.` tags only (an adapter's status) is not the plant's: not sent."""
+        def send(position: int, entries: Sequence[Write | ForceChange]) -> None:
+            if not all(entry.tag.startswith(SYSTEM_PREFIX) for entry in entries):
+                callback(journal_to_wire(position, entries))
+
+        return self.db.on_journal(send)
 
     def hold(self, data: Any) -> None:
         position, entries = journal_from_wire(data, self.db)
@@ -87,6 +93,9 @@ class ReplicationDoor:
     def add_part(self, name: str, capture: Callable[[bool], Any], check: Callable[[Any], Any],
                  apply: Callable[[Any], None]) -> Callable[[], None]:
         return self.replication.add_part(name, capture, check, apply)
+
+
+SKIPPED = "-"  # a journal entry of the active's own `_sys.` tags: it only keeps its place (positions count every entry)
 
 
 # -- to the wire ---------------------------------------------------------------------------
@@ -110,7 +119,9 @@ def state_to_wire(state: CycleState) -> list[Any]:
 def journal_to_wire(position: int, entries: Sequence[Write | ForceChange]) -> list[Any]:
     items: list[list[Any]] = []
     for entry in entries:
-        if type(entry) is ForceChange:
+        if entry.tag.startswith(SYSTEM_PREFIX):
+            items.append([SKIPPED])  # this runtime's own status: it keeps its place in the journal, nothing more
+        elif type(entry) is ForceChange:
             items.append(["f", entry.tag, entry.force, entry.value, _origin(entry.origin), entry.since, entry.restore])
         else:
             assert isinstance(entry, Write)
@@ -203,15 +214,17 @@ def state_from_wire(data: Any, db: TagDatabase) -> CycleState:
     return state
 
 
-def journal_from_wire(data: Any, db: TagDatabase) -> tuple[int, list[Write | ForceChange]]:
-    """The position and entries of a journal message; raises StateRefused for anything malformed."""
+def journal_from_wire(data: Any, db: TagDatabase) -> tuple[int, list[Write | ForceChange | None]]:
+    """The position and entries of a journal message (None: the active's own status, skipped); raises StateRefused for anything malformed."""
     kind, position, items = _list(data, 3, "journal")
     if kind != "journal":
         raise StateRefused(f"not a journal message: {kind!r}")
-    entries: list[Write | ForceChange] = []
+    entries: list[Write | ForceChange | None] = []
     for index, item in enumerate(_list(items, None, "journal entries")):
         item = _list(item, None, f"journal entry {index}")
-        if item and item[0] == "w" and len(item) == 5:
+        if item == [SKIPPED]:
+            entries.append(None)
+        elif item and item[0] == "w" and len(item) == 5:
             _, tag, value, quality, origin = item
             tag, value = _tag_value(db, tag, value, f"journal entry {index}")
             entries.append(Write(tag, value, _origin_from(origin, f"journal entry {index}"), _quality(quality, f"journal entry {index}")))

@@ -208,6 +208,24 @@ async def test_a_quality_change_journaled_by_the_active_keeps_the_value_on_the_s
     assert standby.db.get("spare").quality is Quality.UNCERTAIN
 
 
+async def test_the_actives_own_status_in_its_journal_never_reaches_the_standby_and_keeps_the_positions(pair: Pair) -> None:
+    # An adapter's `_sys.` status (a link's state, Sparkplug's counters) is that runtime's own: a
+    # batch of it alone is not sent, and among plant writes it only keeps its place.
+    active, standby = pair.active, pair.standby
+    await pair.clock.sleep_until(0.055)
+    sent: list[Any] = []
+    undo = active.plant.replication.on_journal(sent.append)
+    driver = Origin("links", role=None)
+    assert active.db.submit([("_sys.fast.overruns", 9)], driver) == [None]
+    assert sent == []
+    assert active.db.submit([("_sys.fast.overruns", 10), ("spare", 5)], driver) == [None, None]
+    undo()
+    assert [item[0] for item in sent[0][2]] == ["-", "w"]
+    assert await pair.fail_over() == 1  # the plant's write only, at its own position
+    await pair.clock.sleep_until(0.085)
+    assert standby.db.value("spare") == 5
+
+
 async def test_forces_are_mirrored_and_stay_in_effect_after_the_takeover(pair: Pair) -> None:
     active, standby = pair.active, pair.standby
     active.db.force("spare", 9, ENGINEER)
