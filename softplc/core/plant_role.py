@@ -53,6 +53,7 @@ class RoleHolder:
     def __init__(self, now: Callable[[], float]) -> None:
         self._now = now
         self.term = RoleTerm()
+        self.member = ""  # this runtime's name in a redundant pair ('' alone), set before any adapter starts
         self._callbacks: list[RoleCallback] = []
         self._lapsed_told = False
         self._lock = threading.Lock()  # `renew` may come from another thread (a lease keeper)
@@ -113,6 +114,10 @@ class RoleHolder:
             term = self.term
             if term.role is PlantRole.ACTIVE and until > term.until and (epoch is None or term.epoch == epoch):
                 self.term = RoleTerm(term.role, term.epoch, until, term.active, term.detail)
+
+    def own(self, name: str) -> str:
+        """`name`, made this runtime's own in a pair (`name-MEMBER`): e.g. a client id both members use at once."""
+        return f"{name}-{self.member}" if self.member else name
 
     def on_change(self, callback: RoleCallback) -> Callable[[], None]:
         """Call `callback(term)` whenever the role, the epoch or the active changes; returns an undo."""

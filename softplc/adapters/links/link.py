@@ -274,7 +274,12 @@ class Link(ABC):
     # -- data out -----------------------------------------------------------------------
 
     def local_changes(self, tags: Sequence[Tag]) -> None:
-        """Tags changed locally (a program's output, a client's write): send those bound out, latest value first."""
+        """Tags changed locally (a program's output, a client's write): send those bound out, latest value first.
+
+        Only while this plant is active: a standby's image is the active's, mirrored, and the active
+        writes it out (docs/redundancy.md)."""
+        if not self.plant.role.is_active():
+            return
         for tag in tags:
             bound = self.bound.get(tag.name)
             if bound is None or not bound.binding.direction.writes:
@@ -296,6 +301,8 @@ class Link(ABC):
                 noted = self.client_writes.pop(name, None)
                 if noted is not None and noted[0] == batch[name]:
                     clients.append((name, batch.pop(name), noted[1]))
+            if not self.plant.role.is_active():
+                return  # fenced since the change (a freeze in the middle of a scan): the new active writes
             items = [(self.bound[name], value) for name, value in batch.items()]
             if items:
                 self._expecting(items)

@@ -94,6 +94,7 @@ class RedundancyAdapter:
     async def start(self, plant: Plant) -> None:
         self.plant = plant
         me = self.settings.me
+        plant.role.member = me.name  # the adapters started after this one make their client ids this member's own
         # Nothing runs as active before the coordinator says so.
         plant.role.set(RoleTerm(PlantRole.STANDBY, 0, detail=f"this runtime ({me.name}) is starting as a member of a "
                                                                "redundant pair and has no role yet: write to the active"))

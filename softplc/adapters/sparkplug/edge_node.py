@@ -13,6 +13,12 @@ per device and the NDEATH, then a clean disconnect. Commands: `commands.py`.
 
 Everything it sends is built and numbered by one coroutine (the publisher), so seq is in the
 order of the messages on the wire.
+
+In a redundant pair both members are the same edge node, so only the active has a session: the
+standby connects nothing (no will, no births), and takes the active's bdSeq with every state
+it mirrors (`plant.replicate`), so its first session after a takeover is numbered after the
+old active's — the old session's late will (a frozen active's) can never kill the new births.
+A member that stops being active publishes its NDEATH and disconnects (docs/redundancy.md).
 """
 
 from __future__ import annotations
@@ -28,7 +34,8 @@ from softplc.adapters.sparkplug.settings import Device, SparkplugSettings
 from softplc.adapters.sparkplug.status import Status
 from softplc.adapters.sparkplug.store import Store
 from softplc.core.commands import CommandRefused, Permission
-from softplc.core.plant import Plant
+from softplc.core.plant import Plant, StateRefused
+from softplc.core.plant_role import PlantRole, RoleTerm
 from softplc.core.tagdb import Origin
 from softplc.protocols.mqtt import MqttConnection, NotConnected, Will
 from softplc.protocols.mqtt_settings import MqttSettings
@@ -85,13 +92,7 @@ class EdgeNode:
         if settings.store_enabled:
             self.store = Store(state_dir / "store", settings.store_max_size)
             await plant.clock.run_blocking(self.store.open)
-        self.connection = MqttConnection(self.mqtt, "sparkplug", plant.clock, will=self._will, clean_start=True)
         self.door = CommandDoor(plant, settings, self, self.status, f"{self.mqtt.host}:{self.mqtt.port}", self.now_ms)
-        self.connection.on_state(self._connection_changed)
-        self.connection.subscribe(node_topic(settings.group_id, "NCMD", settings.edge_node_id), self.door.handle, qos=1)
-        self.connection.subscribe(device_topic(settings.group_id, "DCMD", settings.edge_node_id, "+"), self.door.handle, qos=1)
-        if settings.primary_host:
-            self.connection.subscribe(state_topic(settings.primary_host), self._host_state, qos=1)
         self._undo = [
             plant.tags.on_change(self.changes.note),
             plant.after_cycle(lambda task: self._wake.set() if self.changes.pending else None),
@@ -99,30 +100,41 @@ class EdgeNode:
                                     description="publish the Sparkplug B births again"),
             plant.commands.register("sparkplug.status", lambda arguments, origin: self.describe_state(), permission=Permission.VIEW,
                                     description="the Sparkplug B edge node's connection and primary host state"),
+            plant.role.on_change(self._role_changed),
+            plant.replicate("sparkplug", self._capture_bd_seq, _check_bd_seq, self.sequence_file.follow),
         ]
         self.status.running = True
-        self.status.state = states.CONNECTING
         self.status.primary_host_online = not settings.primary_host
-        self._refresh()
-        self._tasks = [plant.spawn(self.connection.run(), "sparkplug connection"),
-                       plant.spawn(self._publisher(), "sparkplug publisher"),
+        self._tasks = [plant.spawn(self._publisher(), "sparkplug publisher"),
                        plant.spawn(self._status_loop(), "sparkplug status")]
+        self._session: asyncio.Task[None] | None = None
+        self._captured_bd_seq = -1
+        if plant.role.term.role is PlantRole.ACTIVE:
+            self._open()
+        else:
+            self.status.state = states.STANDBY
+        self._refresh()
 
-    async def stop(self) -> None:
-        self._stopping = True
-        for undo in self._undo:
-            undo()
-        self._wake.set()
-        publisher = self._tasks[1] if len(self._tasks) > 1 else None
-        if publisher is not None:
-            try:
-                await asyncio.wait_for(asyncio.shield(publisher), timeout=5.0)  # let it finish the message it is sending
-            except (asyncio.TimeoutError, asyncio.CancelledError):
-                publisher.cancel()
-        changes = self.changes.take()
+    def _open(self) -> None:
+        """A session with the broker (this member is active): its will, its subscriptions, then births."""
+        settings = self.settings
+        self.connection = MqttConnection(self.mqtt, self.plant.role.own("sparkplug"), self.plant.clock, will=self._will,
+                                         clean_start=True)
+        self.connection.on_state(self._connection_changed)
+        self.connection.subscribe(node_topic(settings.group_id, "NCMD", settings.edge_node_id), self.door.handle, qos=1)
+        self.connection.subscribe(device_topic(settings.group_id, "DCMD", settings.edge_node_id, "+"), self.door.handle, qos=1)
+        if settings.primary_host:
+            self.connection.subscribe(state_topic(settings.primary_host), self._host_state, qos=1)
+        self.status.state = states.CONNECTING
+        self._session = self.plant.spawn(self.connection.run(), "sparkplug connection")
+
+    async def _close(self) -> None:
+        """End the session: the DDEATHs and NDEATH if born, then a clean disconnect."""
+        if self._session is None:
+            return
+        session, self._session = self._session, None
         if self.born:
             try:
-                await self._publish_data(changes)
                 now = self.now_ms()
                 for device in self.settings.devices:
                     await self._send(device_topic(self.settings.group_id, "DDEATH", self.settings.edge_node_id, device.id),
@@ -130,11 +142,55 @@ class EdgeNode:
                 await self.connection.publish(self._topic("NDEATH"), payloads.encode_node_death(self.bd_seq, now), qos=1)
             except NotConnected:
                 pass
-        else:
-            self._hold(changes)
-            self._flush_held()
         self.born = False
         await self.connection.close()
+        await cancel_and_wait([session])
+
+    def _role_changed(self, term: RoleTerm) -> None:
+        """In a redundant pair: a session while active, none otherwise (both members are one edge node)."""
+        if self._stopping:
+            return
+        if term.role is PlantRole.ACTIVE and self._session is None:
+            log.info("Sparkplug B: this member is active (epoch %d): connecting as edge node %s/%s", term.epoch,
+                     self.settings.group_id, self.settings.edge_node_id)
+            self.changes.take()  # the births carry the current values
+            self._open()
+        elif term.role is not PlantRole.ACTIVE and self._session is not None:
+            log.info("Sparkplug B: this member is no longer active: NDEATH and disconnect")
+            self.plant.spawn(self._close(), "sparkplug session end")
+            self.status.state = states.STANDBY
+        self._refresh()
+        self._wake.set()
+
+    def _capture_bd_seq(self, full: bool) -> int | None:
+        """The active's bdSeq for its standby (None: unchanged since the last capture)."""
+        value = self.sequence_file.value
+        if not full and value == self._captured_bd_seq:
+            return None
+        self._captured_bd_seq = value
+        return value
+
+    async def stop(self) -> None:
+        self._stopping = True
+        for undo in self._undo:
+            undo()
+        self._wake.set()
+        publisher = self._tasks[0] if self._tasks else None
+        if publisher is not None:
+            try:
+                await asyncio.wait_for(asyncio.shield(publisher), timeout=5.0)  # let it finish the message it is sending
+            except (asyncio.TimeoutError, asyncio.CancelledError):
+                publisher.cancel()
+        changes = self.changes.take()
+        if self.born and self.plant.role.is_active():
+            try:
+                await self._publish_data(changes)
+            except NotConnected:
+                pass
+        elif self._session is not None:
+            self._hold(changes)
+            self._flush_held()
+        await self._close()
         await cancel_and_wait(self._tasks)
         if self.store is not None:
             self.store.close()
@@ -175,7 +231,7 @@ class EdgeNode:
         else:
             self.born = False
             self._host = self._host if self._host is None else HostState(False, self._host.timestamp)
-            self.status.state = states.CONNECTING
+            self.status.state = states.CONNECTING if self._session is not None else states.STANDBY
         self._refresh()
         self._wake.set()
 
@@ -229,6 +285,11 @@ class EdgeNode:
                 log.exception("Sparkplug B: publishing failed; going on")
 
     async def _turn(self) -> None:
+        if self._session is None or not self.plant.role.is_active():
+            # A standby's changes are the active's, mirrored: the active publishes them. (An active
+            # whose term lapsed — frozen, then woken — publishes nothing until it is told its role.)
+            self.changes.take()
+            return
         connection = self.connection
         if self._host_lost:
             self._host_lost = False
@@ -363,3 +424,10 @@ class EdgeNode:
         self.status.stored = store.count if store is not None else 0
         self.status.dropped = (store.dropped if store is not None else 0) + self._dropped
         self.status.publish(self.plant.tags)
+
+
+def _check_bd_seq(data: object) -> int:
+    """The active's bdSeq as a standby receives it."""
+    if not isinstance(data, int) or isinstance(data, bool) or not 0 <= data <= 255:
+        raise StateRefused(f"sparkplug: bdSeq {data!r} is not a number 0..255")
+    return data

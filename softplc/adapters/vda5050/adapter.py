@@ -93,7 +93,7 @@ class VdaMaster:
         self.control = MasterControl(self.roadmap, self.settings, self.links, db)
         db.submit([(f"{robot.id}_radius", robot.radius) for robot in self.vehicles if f"{robot.id}_radius" in db],
                   Origin("vda5050", role=None))
-        connection = self.connection = MqttConnection(self.mqtt, "vda5050", plant.clock, max_payload=MAX_RECEIVED)
+        connection = self.connection = MqttConnection(self.mqtt, plant.role.own("vda5050"), plant.clock, max_payload=MAX_RECEIVED)
         interface, version = self.settings.interface, self.settings.version
         for name in (topics.STATE, topics.CONNECTION, topics.FACTSHEET):
             connection.subscribe(topics.vehicle_filter(interface, version, name), self._receive, qos=1 if name == topics.CONNECTION else 0)
@@ -134,6 +134,8 @@ class VdaMaster:
         clock, control = self.plant.clock, self.control
         while True:
             await clock.sleep(self.settings.tick)
+            if not self.plant.role.is_active():
+                continue  # a standby of a redundant pair sends no orders: its active does (docs/redundancy.md)
             control.tick(clock.now(), liveness=not self._inbox)
             await self.flush()
 
@@ -168,6 +170,8 @@ class VdaMaster:
         for index, (link, name, body) in enumerate(outbox):
             if index % TURN == TURN - 1:
                 await self.plant.clock.sleep(0)  # a burst of orders in turns, scan cycles first
+            if not self.plant.role.is_active():
+                return  # fenced since the tick (a freeze in between): the new active orders
             message = {**link.headers.next(name, self.plant.clock.wall()), **body}
             found = problems("order" if name == topics.ORDER else "instantActions", self.settings.version, message)
             if found:

@@ -61,6 +61,12 @@ class BirthDeathSequence:
         self._write(self.value)
         return self.value
 
+    def follow(self, value: int) -> None:
+        """`value` is the bdSeq of the other member of a redundant pair (the active): this one's next session takes the number after it."""
+        self.value = (value + 1) % WRAP
+        self._taken = False
+        self._write(value)
+
     def _read(self) -> int | None:
         try:
             text = self.path.read_text(encoding="ascii").strip()
