@@ -25,6 +25,9 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".${extras}"
   touch "$stamp"
 fi
+# Bytecode for softplc and the plant's programs now (only what changed): a run then starts without
+# compiling ~300 modules (0.35 s), even where PYTHONDONTWRITEBYTECODE keeps Python from saving it.
+.venv/bin/python -m compileall -q -j 0 softplc programs robots >/dev/null 2>&1 || true
 # Front-end libraries of the web HMI, pinned in hmi/package.json + package-lock.json, installed
 # with npm ci (served under /vendor/) when it has any; skipped while the lock file is unchanged.
 hmi_libraries=$(.venv/bin/python -c 'import json; print(len(json.load(open("hmi/package.json")).get("dependencies") or {}))')

@@ -19,10 +19,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from softplc.config import schema_problems
 from softplc.config.yamlsource import ConfigError, Location, Problem, load_yaml
+from softplc.robotics.map_cache import derived
 
 MAP_SCHEMA: dict[str, Any] = {
     "type": "object",
@@ -82,8 +82,13 @@ class OccupancyGrid:
     def clearance(self) -> np.ndarray:
         """Distance (m) from each cell centre to the nearest occupied cell (or the map edge)."""
         # Pad with an occupied border so the map's edge counts as a wall.
-        padded = np.pad(~self.occupied, 1, constant_values=False)
-        return ndimage.distance_transform_edt(padded)[1:-1, 1:-1] * self.resolution
+        def compute() -> np.ndarray:
+            from scipy import ndimage  # only when the cache has no answer (softplc/robotics/map_cache.py)
+
+            padded = np.pad(~self.occupied, 1, constant_values=False)
+            return np.asarray(ndimage.distance_transform_edt(padded)[1:-1, 1:-1], dtype=np.float64)
+
+        return derived("clearance", self.occupied, compute) * self.resolution
 
     def inflated(self, radius: float) -> OccupancyGrid:
         """A grid where every cell closer than `radius` (m) to an obstacle is occupied too."""

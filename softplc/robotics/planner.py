@@ -15,11 +15,19 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
 
 from softplc.robotics.gridmap import OccupancyGrid
+from softplc.robotics.map_cache import derived
 
 SQRT2 = math.sqrt(2.0)
+
+
+def _regions(blocked: np.ndarray) -> np.ndarray:
+    """The free cells' 8-connected regions, numbered from 1 (0: blocked)."""
+    from scipy import ndimage  # only when the cache has no answer (softplc/robotics/map_cache.py)
+
+    labels, _ = ndimage.label(~blocked, structure=np.ones((3, 3), dtype=int))
+    return np.asarray(labels)
 
 
 @dataclass(frozen=True)
@@ -81,7 +89,7 @@ class PathPlanner:
         # A bytearray, not a list: copying it per plan is a memcpy, and the garbage collector
         # never walks it (a 600k-element list made each young-generation pass take ~50 ms).
         self._static = bytearray(self._padded.ravel().astype(np.uint8).tobytes())
-        self._labels, _ = ndimage.label(~blocked, structure=np.ones((3, 3), dtype=int))
+        self._labels = derived("regions8", blocked, lambda: _regions(blocked))
         s = self._stride
         self._moves = [
             (1, 1.0, 0), (-1, 1.0, 0), (s, 1.0, 0), (-s, 1.0, 0),

@@ -20,9 +20,7 @@ import gc
 import logging
 import os
 import pickle
-import stat
 import sys
-import tempfile
 from importlib.metadata import version
 from pathlib import Path
 from typing import Any
@@ -31,14 +29,15 @@ from asyncua import Server
 from asyncua.server.address_space import AddressSpace, NodeManagementService
 from asyncua.server.standard_address_space import standard_address_space
 
+from softplc.util.cache import cache_dir, trusted, write_atomic
+
 log = logging.getLogger(__name__)
 
 
 def cache_path() -> Path:
     """Where this machine's user keeps the standard nodes of this asyncua and Python version."""
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     python = f"py{sys.version_info.major}{sys.version_info.minor}"
-    return base / "softplc" / f"opcua-standard-nodes-asyncua-{version('asyncua')}-{python}.pickle"
+    return cache_dir() / f"opcua-standard-nodes-asyncua-{version('asyncua')}-{python}.pickle"
 
 
 async def init_server(server: Server, path: Path | None = None) -> None:
@@ -67,7 +66,7 @@ def _fill(aspace: AddressSpace, path: Path) -> None:
 def _load(path: Path) -> dict[Any, Any] | None:
     try:
         with path.open("rb") as file:
-            if not _trusted(os.fstat(file.fileno())) or not _trusted(path.parent.stat()):
+            if not trusted(os.fstat(file.fileno())) or not trusted(path.parent.stat()):
                 log.warning("ignoring %s: not owned by this user, or writable by others", path)
                 return None
             collecting = gc.isenabled()
@@ -87,18 +86,7 @@ def _load(path: Path) -> dict[Any, Any] | None:
 
 def _save(nodes: dict[Any, Any], path: Path) -> None:
     try:
-        path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        # Written aside and renamed: a reader never sees half a file, even with two servers starting.
-        with tempfile.NamedTemporaryFile("wb", dir=path.parent, prefix=path.name, suffix=".tmp", delete=False) as file:
-            try:
-                pickle.dump(nodes, file, protocol=pickle.HIGHEST_PROTOCOL)
-            except BaseException:
-                os.unlink(file.name)
-                raise
-        os.replace(file.name, path)
+        write_atomic(path, lambda file: pickle.dump(nodes, file, protocol=pickle.HIGHEST_PROTOCOL))
     except Exception as error:  # noqa: BLE001 — no cache then; the next start builds the nodes again
         log.info("could not keep the OPC UA standard nodes in %s: %s", path, error)
 
-
-def _trusted(status: os.stat_result) -> bool:
-    return status.st_uid == os.getuid() and not status.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
