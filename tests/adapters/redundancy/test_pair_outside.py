@@ -99,8 +99,7 @@ async def test_only_the_active_writes_to_a_linked_controller(tmp_path: Path, etc
         await a.stop()
         await until(lambda: role(b) == "ACTIVE", 3, "b active")
         assert b.db.submit([("press_setpoint", 7)], OPERATOR) == [None]
-        await until(lambda: remote.holding[7] == 7, 3, "the new active writes out")
-        assert link_b.writes["ok"] >= 1
+        await until(lambda: remote.holding[7] == 7 and link_b.writes["ok"] >= 1, 3, "the new active writes out, answered")
     finally:
         for runtime in (a, b):
             await runtime.stop()

@@ -94,6 +94,7 @@ async def test_history_alarm_journal_and_audit_are_written_once_across_a_failove
         for value in (3, 4, 5):  # 3 clears spare_high, on b
             await settle(b, value)
         await asyncio.sleep(0.3)  # b records scans for a while
+        finishing = time.time()  # b's own stop then ends its recording (BAD samples at that time): not looked at
         await b.stop()
         ended = time.time()
     finally:
@@ -122,7 +123,7 @@ async def test_history_alarm_journal_and_audit_are_written_once_across_a_failove
         # the standby's stop while a recorded left no end-of-recording sample
         assert not [sample for sample in scans if sample.quality is Quality.BAD and began < sample.time < stopped - 0.5]
         # setpoint did not change after the failover: it is not left BAD by the old active's end of recording
-        setpoint = reader.raw("setpoint", 0.0, ended - 0.2).samples
+        setpoint = reader.raw("setpoint", 0.0, finishing).samples
         assert setpoint[-1].quality is Quality.GOOD and setpoint[-1].value == 2.5 and setpoint[-1].time >= stopped - 0.5
     finally:
         reader.close()
