@@ -98,6 +98,7 @@ class Replication:
         self._parts: dict[str, Part] = parts if parts is not None else {}
         self._held: list[tuple[int, Write | ForceChange]] = []  # journal entries of the active, not yet applied there
         self.journal_position: int | None = None  # the active's applied position in the last state applied
+        self._applying = False
         db.on_change(self._note_changed)
 
     @property
@@ -112,6 +113,8 @@ class Replication:
         return lambda: self._parts.pop(name, None) if self._parts.get(name) is part else None
 
     def _note_changed(self, tags: Sequence[Tag]) -> None:
+        if self._applying:
+            return
         changed = self._changed
         for tag in tags:
             if not tag.name.startswith(SYSTEM_PREFIX):
@@ -196,7 +199,11 @@ class Replication:
         db = self.db
         if state.full:
             db.discard_journal()
-        db.mirror(state.tags)
+        self._applying = True  # what the active changed is not this standby's own change to send anywhere
+        try:
+            db.mirror(state.tags)
+        finally:
+            self._applying = False
         if state.forces is not None:
             db.mirror_forces(state.forces)
         self.program_clock.align(state.time)

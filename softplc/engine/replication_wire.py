@@ -20,7 +20,7 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from softplc.core.datatypes import TypeMismatch
+from softplc.core.datatypes import DataType, TypeMismatch
 from softplc.core.forcing import Force, ForceChange
 from softplc.core.origin import Origin
 from softplc.core.plant import StateRefused, TaskView
@@ -180,6 +180,33 @@ def _quality(value: Any, what: str) -> Quality:
     return _QUALITIES[value]
 
 
+_INTEGER_LIMITS = {kind: kind.limits for kind in DataType if kind.is_integer}
+_TYPES_OF: dict[int, tuple[int, dict[str, DataType]]] = {}  # id(db) → (its size, the replicated tags' types)
+
+
+def _replicated_types(db: TagDatabase) -> dict[str, DataType]:
+    """Each replicated tag's type (not `_sys.`), kept per database until its tags change (an online change)."""
+    known = _TYPES_OF.get(id(db))
+    if known is None or known[0] != len(db):
+        known = (len(db), {tag.name: tag.definition.type for tag in db if not tag.name.startswith(SYSTEM_PREFIX)})
+        _TYPES_OF.clear()  # one plant per process: never more than one entry
+        _TYPES_OF[id(db)] = known
+    return known[1]
+
+
+def _exact(kind: DataType, value: Any) -> bool:
+    """`value` is already what `kind.coerce` would return, unchanged (float32 and strings always take the full check)."""
+    kind_of = type(value)
+    if kind is DataType.FLOAT64:
+        return kind_of is float
+    if kind is DataType.BOOL:
+        return kind_of is bool
+    if kind_of is int and kind in _INTEGER_LIMITS:
+        low, high = _INTEGER_LIMITS[kind]
+        return low <= value <= high
+    return False
+
+
 def state_from_wire(data: Any, db: TagDatabase) -> CycleState:
     """A CycleState from its plain form; raises StateRefused for anything malformed (see the module docstring)."""
     kind, sequence, full, task, time, journal, tags, forces, programs, parts = _list(data, 10, "state")
@@ -187,10 +214,22 @@ def state_from_wire(data: Any, db: TagDatabase) -> CycleState:
         raise StateRefused(f"not a state message: {kind!r}")
     state = CycleState(int(_typed(sequence, int, "sequence")), _typed(full, bool, "full"), _typed(task, str, "task"),
                        _number(time, "time"), int(_typed(journal, int, "journal")))
+    kinds = _replicated_types(db)
+    qualities, finite, append, float64 = _QUALITIES, math.isfinite, state.tags.append, DataType.FLOAT64
     for index, item in enumerate(_list(tags, None, "tags")):
+        # The common case checked inline (a 10,000-tag state is 10,000 of these): a list of four, a
+        # known tag's name, a value already of its exact type (a float64's float, a bool, an integer
+        # in range), a known quality, a finite float time. Anything else takes the path that says why.
+        if type(item) is list and len(item) == 4:
+            name, value, quality, timestamp = item
+            kind = kinds.get(name) if type(name) is str else None
+            if (kind is not None and type(timestamp) is float and finite(timestamp) and quality in qualities
+                    and ((kind is float64 and type(value) is float) or _exact(kind, value))):
+                append((name, value, qualities[quality], timestamp))
+                continue
         name, value, quality, timestamp = _list(item, 4, f"tag {index}")
         name, value = _tag_value(db, name, value, f"tag {index}")
-        state.tags.append((name, value, _quality(quality, f"tag {name}"), _number(timestamp, f"tag {name}")))
+        append((name, value, _quality(quality, f"tag {name}"), _number(timestamp, f"tag {name}")))
     if forces is not None:
         state.forces = []
         for index, item in enumerate(_list(forces, None, "forces")):

@@ -102,19 +102,23 @@ class SyncServer:
     # -- feeding ---------------------------------------------------------------------------
 
     def send_cycle(self, plant: Plant, task: TaskView) -> None:
-        """At a cycle boundary: capture what changed (nothing when no standby listens); it is encoded and sent just after.
+        """At a cycle boundary: capture what changed, encode and send it (nothing when no standby listens) — just after it.
 
-        Only the capture runs inside the boundary (it must: it is the cycle's state); encoding and
-        the TLS write follow as the loop's next callback, in order with journal entries sent later.
+        Nothing of it runs inside the task's cycle: the capture is the loop's next callback. That is
+        still this cycle's state: the engine starts its next cycle only after `await sleep(0)`,
+        whose wake-up is queued behind this callback, and programs, forces and journaled writes
+        change only in a cycle. (A `_sys.`-free tag an adapter commits in between goes with it,
+        one state early; the standby takes it either way.)
         """
+        if self.standby is not None:
+            asyncio.get_running_loop().call_soon(self._capture_and_send, plant, task)
+
+    def _capture_and_send(self, plant: Plant, task: TaskView) -> None:
         standby = self.standby
         if standby is None:
             return
         state = plant.replication.capture(task)
         standby.sent_sequence = state[1]
-        asyncio.get_running_loop().call_soon(self._send_state, standby, state)
-
-    def _send_state(self, standby: StandbyConnection, state: list[Any]) -> None:
         if not standby.send(state):
             self._lost(standby, "it could not keep up (its backlog passed the limit) or went away")
 
