@@ -11,7 +11,7 @@ the last DBIRTH arrive (a listener on this process's loop, subscribed to the bir
 Goals (issue 26): >= 50,000 metric changes/s published batched with the 10 ms task's p99 start
 latency <= 1 ms; rebirth <= 1 s after the NCMD.
 
-    .venv/bin/python bench/sparkplug_throughput.py                  # 500 tags x 10 ms = 50,000/s, 5 devices
+    .venv/bin/python bench/sparkplug_throughput.py                  # 600 tags x 10 ms = 60,000/s offered, 5 devices
     .venv/bin/python bench/sparkplug_throughput.py --baseline       # the same plant without the edge node
     .venv/bin/python bench/sparkplug_throughput.py --tags 5000 --interval 100ms
 """
@@ -207,7 +207,9 @@ def publishing_cost(tags: int, devices: int, rounds: int = 200) -> float:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tags", type=int, default=500)
+    # 600: more than the goal is offered, so that "published >= 50,000/s" can be met by keeping
+    # up (at exactly 50,000/s offered, a 30 s window of a plant keeping up reads 49,99x).
+    parser.add_argument("--tags", type=int, default=600, help="tags changing at every scan of the flood task (default 600)")
     parser.add_argument("--interval", default="10ms", help="flood task interval (default 10ms)")
     parser.add_argument("--devices", type=int, default=5)
     parser.add_argument("--seconds", type=float, default=30.0)

@@ -155,12 +155,8 @@ class EdgeNode:
                      self.settings.group_id, self.settings.edge_node_id)
             self.changes.take()  # the births carry the current values
             self._open()
-        elif term.role is not PlantRole.ACTIVE and self._session is not None:
-            log.info("Sparkplug B: this member is no longer active: NDEATH and disconnect")
-            self.plant.spawn(self._close(), "sparkplug session end")
-            self.status.state = states.STANDBY
         self._refresh()
-        self._wake.set()
+        self._wake.set()  # the publisher ends the session of a member no longer active (it numbers every message sent)
 
     def _capture_bd_seq(self, full: bool) -> int | None:
         """The active's bdSeq for its standby (None: unchanged since the last capture)."""
@@ -285,6 +281,11 @@ class EdgeNode:
                 log.exception("Sparkplug B: publishing failed; going on")
 
     async def _turn(self) -> None:
+        if self._session is not None and self.plant.role.term.role is not PlantRole.ACTIVE:
+            log.info("Sparkplug B: this member is no longer active: NDEATH and disconnect")
+            await self._close()
+            self.status.state = states.STANDBY
+            self._refresh()
         if self._session is None or not self.plant.role.is_active():
             # A standby's changes are the active's, mirrored: the active publishes them. (An active
             # whose term lapsed — frozen, then woken — publishes nothing until it is told its role.)
@@ -336,6 +337,10 @@ class EdgeNode:
         now = self.now_ms()
         group, node, by_alias = self.settings.group_id, self.settings.edge_node_id, self.settings.aliases
         for index, (device, batch) in enumerate(batches):
+            if index:
+                # One device's message at a time: a scan cycle due meanwhile runs first (the real
+                # clock holds a sleeper waking within 5 ms of a release until that cycle has run).
+                await self.plant.clock.sleep(0)
             payload = payloads.encode_data(now, self.seq.next(), batch, by_alias=by_alias)
             try:
                 await self._send(device_topic(group, "DDATA", node, device.id), payload)
