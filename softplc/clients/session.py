@@ -7,7 +7,6 @@ and a forced tag is served with the StatusCode GoodLocalOverride (softplc/core/f
 
 from __future__ import annotations
 
-import asyncio
 import fnmatch
 import math
 from collections.abc import AsyncIterator
@@ -22,6 +21,7 @@ from softplc.core.datatypes import DataType
 from softplc.core.tags import Access, Quality, TagDef
 from softplc.protocols.opcua_variants import DATA_TYPE_IDS
 from softplc.util.suggest import did_you_mean
+from softplc.util.tasks import within
 
 if TYPE_CHECKING:
     from softplc.clients.login import Login
@@ -232,7 +232,7 @@ async def open_live_session(login: Login) -> AsyncIterator[LiveSession]:
         yield await LiveSession.open(client, login.namespace)
     finally:
         try:
-            await asyncio.wait_for(client.disconnect(), login.timeout)
+            await within(login.timeout, client.disconnect())
         except Exception:  # the server is gone already: nothing to close politely
             client.disconnect_socket()
 

@@ -16,6 +16,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Awaitable, Callable
 from typing import Any, TypeVar
 
+from softplc.util.tasks import within
+
 T = TypeVar("T")
 
 
@@ -210,7 +212,7 @@ class SimClock(Clock):
                     self._wakeup.clear()
                     try:
                         # A new, earlier sleeper may arrive while we wait in real time.
-                        await asyncio.wait_for(self._wakeup.wait(), delay)
+                        await within(delay, self._wakeup.wait())
                         continue
                     except TimeoutError:
                         pass
@@ -289,3 +291,5 @@ async def wait_for(clock: Clock, awaitable: Awaitable[T], timeout: float) -> T:
         raise TimeoutError(f"timed out after {timeout} s")
     finally:
         timer.cancel()
+        if not task.done():
+            task.cancel()  # we were cancelled ourselves: what we waited for goes too

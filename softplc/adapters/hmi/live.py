@@ -45,6 +45,7 @@ from softplc.core.clock import Clock
 from softplc.core.tagdb import TagDatabase
 from softplc.core.tags import Tag
 from softplc.util.peers import PeerLog, peer_host
+from softplc.util.tasks import within
 
 if TYPE_CHECKING:
     from softplc.adapters.hmi.alarm_feed import AlarmFeed
@@ -107,7 +108,7 @@ class Hub:
             task.cancel()
         for client in list(self.clients):
             try:
-                await asyncio.wait_for(client.ws.close(code=1001, message=b"runtime stopping"), 1.0)
+                await within(1.0, client.ws.close(code=1001, message=b"runtime stopping"))
             except (asyncio.TimeoutError, ConnectionError, RuntimeError):
                 client.abort()
             await client.stop()

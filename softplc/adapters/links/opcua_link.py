@@ -33,6 +33,7 @@ from softplc.core.tags import Quality
 from softplc.protocols.opcua_client import ClientCertificate, client_certificate, ensure_client_certificate, make_client
 from softplc.protocols.opcua_names import DEFAULT_NAMESPACE
 from softplc.protocols.opcua_remote import binding_problem, remote_variant, status_text, tag_value, variant_type_of
+from softplc.util.tasks import within
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +85,7 @@ class OpcuaLink(Link):
         client, self.client, self.subscription = self.client, None, None
         if client is not None:
             try:
-                await asyncio.wait_for(client.disconnect(), self.settings.timeout)
+                await within(self.settings.timeout, client.disconnect())
             except (OSError, TimeoutError, ua.UaError, ConnectionError):
                 client.disconnect_socket()
 
@@ -105,7 +106,7 @@ class OpcuaLink(Link):
         """One request; LinkError says what failed, in the remote's words where it gave any."""
         self.requests += 1
         try:
-            return await asyncio.wait_for(request, self.settings.timeout * 2)
+            return await within(self.settings.timeout * 2, request)
         except ua.UaStatusCodeError as error:
             hint = ""
             if "BadCertificate" in type(error).__name__ or "BadSecurityChecksFailed" in type(error).__name__:

@@ -18,6 +18,7 @@ from softplc.adapters.redundancy.link import VERSION, LinkRefused, check_data, c
 from softplc.adapters.redundancy.sync_server import HANDSHAKE_TIMEOUT
 from softplc.core.plant import StateRefused
 from softplc.security.pair_certificates import fingerprint_of_der
+from softplc.util.tasks import within
 
 log = logging.getLogger(__name__)
 
@@ -42,9 +43,8 @@ class SyncClient:
         plant = adapter.plant
         host, port = self.address
         try:
-            reader, writer = await asyncio.wait_for(asyncio.open_connection(
-                host, port, ssl=self.context, server_hostname=f"softplc-{self.active}", ssl_handshake_timeout=HANDSHAKE_TIMEOUT),
-                HANDSHAKE_TIMEOUT + 1)
+            reader, writer = await within(HANDSHAKE_TIMEOUT + 1, asyncio.open_connection(
+                host, port, ssl=self.context, server_hostname=f"softplc-{self.active}", ssl_handshake_timeout=HANDSHAKE_TIMEOUT))
         except ssl.SSLError as error:
             raise LinkRefused(f"TLS handshake with {host}:{port} failed ({error.reason or error}): not the pinned peer") from None
         try:
@@ -53,7 +53,7 @@ class SyncClient:
                 raise LinkRefused(f"{host}:{port} presents a certificate that is not the peer's pinned one")
             nonce = os.urandom(16)
             writer.write(encode(["hello", VERSION, adapter.settings.me.name, adapter.config_hash, nonce, plant.role.epoch]))
-            member, config_hash, epoch = check_welcome(await asyncio.wait_for(read_message(reader), HANDSHAKE_TIMEOUT), nonce)
+            member, config_hash, epoch = check_welcome(await within(HANDSHAKE_TIMEOUT, read_message(reader)), nonce)
             if member != adapter.settings.peer.name:
                 raise LinkRefused(f"{host}:{port} says it is {member!r}, the peer is {adapter.settings.peer.name!r}")
             if config_hash != adapter.config_hash:
@@ -66,7 +66,7 @@ class SyncClient:
             while True:
                 # The active sends a state every cycle, or a heartbeat every 0.2 s: silence means a
                 # half-open link (a frozen active, a cut cable) — reconnect rather than wait for ever.
-                message = await asyncio.wait_for(read_message(reader), SILENCE)
+                message = await within(SILENCE, read_message(reader))
                 counter += 1
                 payload = check_data(message, epoch, counter)
                 if not isinstance(payload, list) or not payload:
@@ -89,7 +89,7 @@ class SyncClient:
         except LinkRefused as refused:
             try:
                 writer.write(encode(["refuse", str(refused)]))
-                await asyncio.wait_for(writer.drain(), 1.0)
+                await within(1.0, writer.drain())
             except Exception:  # the link is gone already
                 pass
             raise

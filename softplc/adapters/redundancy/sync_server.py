@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from softplc.adapters.redundancy.link import VERSION, LinkRefused, check_hello, encode, expect, read_message
 from softplc.security.pair_certificates import fingerprint_of_der
+from softplc.util.tasks import within
 
 if TYPE_CHECKING:
     from softplc.core.plant import Plant, TaskView
@@ -142,7 +143,7 @@ class SyncServer:
         reader = asyncio.StreamReader()
         protocol = asyncio.StreamReaderProtocol(reader)
         try:
-            secured = await asyncio.wait_for(loop.start_tls(transport, protocol, self.context, server_side=True), HANDSHAKE_TIMEOUT)
+            secured = await within(HANDSHAKE_TIMEOUT, loop.start_tls(transport, protocol, self.context, server_side=True))
         except (ssl.SSLError, asyncio.TimeoutError, ConnectionError, OSError) as error:
             transport.close()
             self.adapter.refused(f"sync link from {where}: TLS handshake failed ({_reason(error)}): not the pinned peer")
@@ -173,7 +174,7 @@ class SyncServer:
         der = writer.get_extra_info("ssl_object").getpeercert(binary_form=True)
         if der is None or fingerprint_of_der(der) != self.peer_fingerprint:
             raise LinkRefused("its certificate is not the peer's pinned certificate")
-        member, config_hash, nonce, _ = check_hello(await asyncio.wait_for(read_message(reader), HANDSHAKE_TIMEOUT))
+        member, config_hash, nonce, _ = check_hello(await within(HANDSHAKE_TIMEOUT, read_message(reader)))
         if member != adapter.settings.peer.name:
             raise LinkRefused(f"it says it is {member!r}, the peer is {adapter.settings.peer.name!r}")
         if config_hash != adapter.config_hash:
@@ -208,7 +209,7 @@ async def _say_refused(writer: asyncio.StreamWriter, why: str) -> None:
     try:
         if writer.get_extra_info("ssl_object") is not None and not writer.transport.is_closing():
             writer.write(encode(["refuse", why]))
-            await asyncio.wait_for(writer.drain(), 1.0)
+            await within(1.0, writer.drain())
     except Exception:  # the peer is gone or never spoke TLS: nothing to tell it
         pass
 

@@ -45,6 +45,7 @@ from softplc.robotics.loop import ControlLoop
 from softplc.robotics.peers import PEER_TAGS, PeerView
 from softplc.robotics.protocol import Answer, Registration, encode_report
 from softplc.robotics.robots import RobotFile, unknown_id_message
+from softplc.util.tasks import within
 
 log = logging.getLogger(__name__)
 
@@ -278,7 +279,7 @@ class RobotAgent:
                                  f"with the operator role (softplc users add {robot_id} --role operator)") from None
             raise
         try:
-            await asyncio.wait_for(io.answered.wait(), ANSWER_TIMEOUT)
+            await within(ANSWER_TIMEOUT, io.answered.wait())
         except asyncio.TimeoutError:
             raise Unanswered(f"no answer to the registration within {ANSWER_TIMEOUT:g} s") from None
         assert io.answer is not None
