@@ -152,6 +152,14 @@ def test_a_second_signal_soon_after_the_first_never_kills_the_process(tmp_path: 
         assert sum("received while stopping" in line for line in process.lines) <= 1, output
 
 
+# A Ctrl-C at a terminal reaches a process whose SIGINT has its default action. A test run started
+# in the background of a non-interactive shell ignores SIGINT, and its children inherit that (Python
+# then installs no KeyboardInterrupt): the command is exec'd with the default action restored, in
+# the same process (the signal the test sends still reaches it).
+AS_FROM_A_TERMINAL = [sys.executable, "-c", "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+                      "os.execv(sys.argv[1], sys.argv[1:])"]
+
+
 def _softplc_imported(process: subprocess.Popen[str], lines: list[str], timeout: float = 60) -> None:
     """Wait until the package `softplc` is imported: softplc's own code runs from here (before it,
     Python's start-up reports a Ctrl-C itself, e.g. "Failed checking if argv[0] is an import path entry")."""
@@ -174,7 +182,8 @@ def test_ctrl_c_while_softplc_is_starting_exits_quietly(tmp_path: Path, delay: f
     # -X importtime tells when the package is imported: the Ctrl-C lands in softplc's own start
     # (imports, the configuration, the runtime starting), `delay` seconds later.
     process = subprocess.Popen(
-        [sys.executable, "-X", "importtime", SOFTPLC, "run", str(plant), "--no-status", "--no-servers", "--state-dir", str(tmp_path / "state")],
+        [*AS_FROM_A_TERMINAL, sys.executable, "-X", "importtime", SOFTPLC, "run", str(plant), "--no-status", "--no-servers",
+         "--state-dir", str(tmp_path / "state")],
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     lines: list[str] = []
