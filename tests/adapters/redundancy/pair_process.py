@@ -214,7 +214,8 @@ class Pair:
         ports = {"sync_a": listen_a, "opcua_a_port": free_port(), "opcua_b_port": free_port()}
         ports["opcua_a_url"] = f"opc.tcp://127.0.0.1:{ports['opcua_a_port']}/softplc/"  # type: ignore[assignment]
         ports["opcua_b_url"] = f"opc.tcp://127.0.0.1:{ports['opcua_b_port']}/softplc/"  # type: ignore[assignment]
-        self.config = write_pair(folder, etcd.endpoint, servers=SERVERS, interval=interval, ports=ports,
+        # 1 s: the faults are judged against the takeover time of issue 25 (etcd tuned for it)
+        self.config = write_pair(folder, etcd.endpoint, servers=SERVERS, interval=interval, lease="1s", ports=ports,
                                  proxies={"a": self.proxy.port} if self.proxy else None)
         text = self.config.read_text().replace("        bind: {part: part, scans: scans, edges: edges, done: done, draw: draw}\n",
                                                "        bind: {part: part, scans: scans, edges: edges, done: done, draw: draw}\n"

@@ -136,7 +136,9 @@ async def test_a_malformed_or_replayed_state_from_the_active_is_refused_and_noth
         await until(lambda: b.db.value("_sys.redundancy.refused") >= 1, 10, "the replayed frame is refused")
         assert b.db.value("scans") == 99  # the good state was applied, the replayed one not
         assert "replayed" in b.db.value("_sys.redundancy.peer")
-        assert any(answer[0] == "refuse" and "replayed" in answer[1] for answer in fake.answers)
+        # the refusal is sent before the link closes; the active reads it in its own time
+        await until(lambda: any(answer[0] == "refuse" and "replayed" in answer[1] for answer in fake.answers), 5,
+                    "the refusal reaches the active")
         before = b.db.value("_sys.redundancy.refused")
         fake.frames = [["data", 1_000_000, 1, [*good[:6], [["no_such_tag", 1, "good", 0.0]], *good[7:]]]]
         await until(lambda: b.db.value("_sys.redundancy.refused") > before, 5, "the malformed state is refused")

@@ -55,7 +55,7 @@ async def test_the_overview_draws_the_roadmap_the_orders_and_the_vehicles_state(
                 await page.wait_for_selector(".vda-panel tr[data-robot='r01']")
                 lanes = await page.locator("g.roadmap line").count()
                 assert lanes == len({tuple(sorted(key.split("-"))) for key in adapter(runtime, "vda5050").roadmap.lanes})
-                await page.wait_for_function("document.querySelectorAll('g.vda-orders polyline')[1].getAttribute('points').length > 0")
+                await page.wait_for_function("() => (document.querySelectorAll('g.vda-orders polyline')[1]?.getAttribute('points') || '').length > 0")
                 base, horizon = [await line.get_attribute("stroke-dasharray") for line in await page.locator("g.vda-orders polyline").all()][1::-1]
                 assert base is None and horizon == "8 6"  # the base solid, the horizon dashed
                 r01 = await page.locator(".vda-panel tr[data-robot='r01']").inner_text()
