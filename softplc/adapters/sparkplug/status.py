@@ -14,7 +14,7 @@ OFF = "off"
 CONNECTING = "connecting"
 WAITING = "waiting for primary host"
 ONLINE = "online"
-STANDBY = "standby (the active member of the pair publishes)"
+STANDBY = "standby (the active publishes)"
 
 
 @dataclass
