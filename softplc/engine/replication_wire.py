@@ -17,7 +17,7 @@ journal entry raises `StateRefused` with the reason and changes nothing.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from softplc.core.datatypes import DataType, TypeMismatch
@@ -42,6 +42,7 @@ class ReplicationDoor:
     def __init__(self, replication: Replication) -> None:
         self.replication = replication
         self.db = replication.db
+        self._kinds = replicated_types(self.db)  # a database's tags are fixed when it is made
 
     @property
     def sequence(self) -> int:
@@ -63,7 +64,7 @@ class ReplicationDoor:
         return state_to_wire(self.replication.capture_full())
 
     def apply(self, data: Any) -> None:
-        state = state_from_wire(data, self.db)
+        state = state_from_wire(data, self.db, self._kinds)
         try:
             self.replication.apply(state)
         except (ReplicationError, ProgramStateError) as error:
@@ -181,23 +182,15 @@ def _quality(value: Any, what: str) -> Quality:
 
 
 _INTEGER_LIMITS = {kind: kind.limits for kind in DataType if kind.is_integer}
-_TYPES_OF: dict[int, tuple[int, dict[str, DataType]]] = {}  # id(db) → (its size, the replicated tags' types)
-
-
-def _replicated_types(db: TagDatabase) -> dict[str, DataType]:
-    """Each replicated tag's type (not `_sys.`), kept per database until its tags change (an online change)."""
-    known = _TYPES_OF.get(id(db))
-    if known is None or known[0] != len(db):
-        known = (len(db), {tag.name: tag.definition.type for tag in db if not tag.name.startswith(SYSTEM_PREFIX)})
-        _TYPES_OF.clear()  # one plant per process: never more than one entry
-        _TYPES_OF[id(db)] = known
-    return known[1]
+def replicated_types(db: TagDatabase) -> dict[str, DataType]:
+    """Each replicated tag's type (every tag but `_sys.`)."""
+    return {tag.name: tag.definition.type for tag in db if not tag.name.startswith(SYSTEM_PREFIX)}
 
 
 def _exact(kind: DataType, value: Any) -> bool:
     """`value` is already what `kind.coerce` would return, unchanged (float32 and strings always take the full check)."""
     kind_of = type(value)
-    if kind is DataType.FLOAT64:
+    if kind is DataType.FLOAT64:  # (state_from_wire checks this one inline, before calling)
         return kind_of is float
     if kind is DataType.BOOL:
         return kind_of is bool
@@ -207,14 +200,16 @@ def _exact(kind: DataType, value: Any) -> bool:
     return False
 
 
-def state_from_wire(data: Any, db: TagDatabase) -> CycleState:
-    """A CycleState from its plain form; raises StateRefused for anything malformed (see the module docstring)."""
+def state_from_wire(data: Any, db: TagDatabase, kinds: Mapping[str, DataType] | None = None) -> CycleState:
+    """A CycleState from its plain form; raises StateRefused for anything malformed (see the module docstring).
+
+    `kinds`: `replicated_types(db)`, when the caller keeps it between states."""
     kind, sequence, full, task, time, journal, tags, forces, programs, parts = _list(data, 10, "state")
     if kind != "state":
         raise StateRefused(f"not a state message: {kind!r}")
     state = CycleState(int(_typed(sequence, int, "sequence")), _typed(full, bool, "full"), _typed(task, str, "task"),
                        _number(time, "time"), int(_typed(journal, int, "journal")))
-    kinds = _replicated_types(db)
+    kinds = kinds if kinds is not None else replicated_types(db)
     qualities, finite, append, float64 = _QUALITIES, math.isfinite, state.tags.append, DataType.FLOAT64
     for index, item in enumerate(_list(tags, None, "tags")):
         # The common case checked inline (a 10,000-tag state is 10,000 of these): a list of four, a
