@@ -32,6 +32,7 @@ from typing import Any, Protocol
 from softplc.core.clock import Clock
 from softplc.robotics.driver import PlanRequest, run_plan
 from softplc.robotics.planner import PathPlanner, Plan
+from softplc.util.tasks import within
 
 log = logging.getLogger(__name__)
 
@@ -143,7 +144,7 @@ class _Worker:
         if self.process.stdin is not None:
             self.process.stdin.close()  # the worker ends at the end of its input
         try:
-            await asyncio.wait_for(self.process.wait(), 2.0)
+            await within(2.0, self.process.wait())
         except TimeoutError:
             self.process.kill()
             await self.process.wait()

@@ -43,7 +43,7 @@ from softplc.protocols.sparkplug import payloads
 from softplc.protocols.sparkplug.sequence import BirthDeathSequence, MessageSequence
 from softplc.protocols.sparkplug.topics import HostState, device_topic, node_topic, parse_state, state_topic
 from softplc.util.peers import PeerLog
-from softplc.util.tasks import cancel_and_wait
+from softplc.util.tasks import cancel_and_wait, within
 
 log = logging.getLogger(__name__)
 
@@ -174,7 +174,7 @@ class EdgeNode:
         publisher = self._tasks[0] if self._tasks else None
         if publisher is not None:
             try:
-                await asyncio.wait_for(asyncio.shield(publisher), timeout=5.0)  # let it finish the message it is sending
+                await within(5.0, asyncio.shield(publisher))  # let it finish the message it is sending
             except (asyncio.TimeoutError, asyncio.CancelledError):
                 publisher.cancel()
         changes = self.changes.take()
