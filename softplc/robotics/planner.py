@@ -336,31 +336,33 @@ class PathPlanner:
         """Drop waypoints that a straight line can skip (no obstacle, no penalised cell)."""
         if len(cells) <= 2:
             return cells
+        # One array of the cells a line may not touch: each sight line is then a few array
+        # operations, not a Python loop over ~3 samples a cell (most of a plan's time before).
+        avoid = np.frombuffer(blocked, dtype=np.uint8).astype(bool)
+        if penalty:
+            avoid[np.fromiter(penalty, dtype=np.intp, count=len(penalty))] = True
         result = [cells[0]]
         anchor = 0
         while anchor < len(cells) - 1:
             reach = anchor + 1
             # Greedy: the farthest waypoint still in sight of the anchor.
             for candidate in range(len(cells) - 1, anchor + 1, -1):
-                if self._visible(cells[anchor], cells[candidate], blocked, penalty):
+                if self._visible(cells[anchor], cells[candidate], avoid):
                     reach = candidate
                     break
             result.append(cells[reach])
             anchor = reach
         return result
 
-    def _visible(self, a: int, b: int, blocked: bytearray, penalty: dict[int, float]) -> bool:
+    def _visible(self, a: int, b: int, avoid: np.ndarray) -> bool:
+        """Whether the line between the centres of cells `a` and `b` touches no cell of `avoid`."""
         stride = self._stride
         ax, ay = a % stride, a // stride
         bx, by = b % stride, b // stride
         steps = int(max(abs(bx - ax), abs(by - ay)) * 3) + 1
-        for k in range(steps + 1):
-            t = k / steps
-            # Check the cells around the sample point too: the line passes between centres.
-            fx, fy = ax + (bx - ax) * t, ay + (by - ay) * t
-            for cx in {int(math.floor(fx + 0.49)), int(math.floor(fx + 0.51))}:
-                for cy in {int(math.floor(fy + 0.49)), int(math.floor(fy + 0.51))}:
-                    index = cy * stride + cx
-                    if blocked[index] or index in penalty:
-                        return False
-        return True
+        t = np.arange(steps + 1) / steps
+        # Check the cells around each sample point too: the line passes between centres.
+        fx, fy = ax + (bx - ax) * t, ay + (by - ay) * t
+        columns = (np.floor(fx + 0.49).astype(np.intp), np.floor(fx + 0.51).astype(np.intp))
+        rows = (np.floor(fy + 0.49).astype(np.intp) * stride, np.floor(fy + 0.51).astype(np.intp) * stride)
+        return not any(avoid[row + column].any() for row in rows for column in columns)

@@ -28,6 +28,7 @@ from asyncua.common.utils import ServiceError
 from asyncua.crypto.cert_gen import dump_private_key_as_pem, generate_private_key, generate_self_signed_app_certificate
 from cryptography import x509
 from cryptography.hazmat.primitives import serialization
+from cryptography.hazmat.primitives.asymmetric import rsa
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from softplc.security.users import fingerprint, normalise_fingerprint
@@ -93,6 +94,18 @@ class Pki:
         os.chmod(self.own_dir, 0o700)
 
     # -- the server's own certificate ---------------------------------------------------
+
+    def own_identity(self, application_uri: str, hostnames: list[str]) -> tuple[x509.Certificate, rsa.RSAPrivateKey]:
+        """The server's certificate and private key, loaded (made first when missing or expired).
+
+        The key is the one this PKI made and keeps readable by its owner only, so the RSA key
+        checks that guard against a key from elsewhere (~40 ms of a start for 2048 bits) are skipped.
+        """
+        certificate_path, key_path = self.ensure_server_certificate(application_uri, hostnames)
+        key = serialization.load_pem_private_key(key_path.read_bytes(), password=None, unsafe_skip_rsa_key_validation=True)
+        if not isinstance(key, rsa.RSAPrivateKey):
+            raise ValueError(f"{key_path}: not an RSA private key (delete {self.own_dir} to make a new one)")
+        return load_certificate_file(certificate_path), key
 
     def ensure_server_certificate(self, application_uri: str, hostnames: list[str]) -> tuple[Path, Path]:
         """Return (certificate, key) paths, generating them on first start or when expired."""

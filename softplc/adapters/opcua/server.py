@@ -247,14 +247,14 @@ class OpcUaServer:
         assert self.pki is not None
         if settings.secured:
             if settings.certificate is not None and settings.private_key is not None:
-                certificate, key = settings.certificate, settings.private_key
+                await server.load_certificate(str(settings.certificate))
+                await server.load_private_key(str(settings.private_key))
             else:
                 host = settings.host
                 hosts = [host] if host not in ("0.0.0.0", "::") else []
                 # Key generation takes a moment on first start: keep it off the loop.
-                certificate, key = await asyncio.to_thread(self.pki.ensure_server_certificate, settings.application_uri, hosts)
-            await server.load_certificate(str(certificate))
-            await server.load_private_key(str(key))
+                own = await asyncio.to_thread(self.pki.own_identity, settings.application_uri, hosts)
+                server.iserver.certificate, server.iserver.private_key = own  # what Server.load_certificate/_private_key set
         if POLICY_NONE in settings.policies and not settings.loopback:
             log.warning("OPC UA offers SecurityPolicy None on %s: traffic and passwords are not protected", settings.host)
         server.set_security_policy([POLICIES[p] for p in settings.policies], permission_ruleset=RolePermissions())

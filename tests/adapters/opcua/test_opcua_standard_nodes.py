@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from asyncua import Server, ua
 
-from softplc.adapters.opcua.standard_nodes import init_server
+from softplc.adapters.opcua.standard_nodes import LazyNodes, cache_path, init_server
 from softplc.core.clock import RealClock, SimClock
 from tests.opcua_support import running_plant
 
@@ -77,3 +77,44 @@ async def test_only_a_simulation_keeps_and_loads_the_cache(tmp_path: Path, monke
         pass
     kept = list((tmp_path / "cache").glob("softplc/*.pickle"))
     assert len(kept) == (1 if clock is SimClock else 0)
+
+
+async def test_loaded_nodes_are_unpickled_only_when_asked_for(tmp_path: Path) -> None:
+    path = tmp_path / "nodes.pickle"
+    built = await _started(path)
+    loaded = await _started(path)
+    nodes = loaded.iserver.aspace._nodes
+    assert isinstance(nodes, LazyNodes)
+    still_pickled = len(nodes._pickled)
+    assert still_pickled > 5000  # asyncua's init and the Server object touched a few hundred at most
+    node_id = ua.NodeId(ua.ObjectIds.AnalogItemType)
+    assert node_id in nodes and len(nodes._pickled) == still_pickled  # `in` unpickles nothing
+    ours, theirs = loaded.iserver.aspace[node_id], built.iserver.aspace[node_id]
+    assert len(nodes._pickled) == still_pickled - 1 and loaded.iserver.aspace.get(node_id) is ours
+    assert ours.attributes[ua.AttributeIds.BrowseName].value.Value == theirs.attributes[ua.AttributeIds.BrowseName].value.Value
+    assert [ref.NodeId for ref in ours.references] == [ref.NodeId for ref in theirs.references]
+    # Whole-dictionary views see every node; deleting one works for a pickled node too.
+    assert len(nodes) == len(list(nodes)) == len(nodes.keys()) == len(built.iserver.aspace._nodes)
+    other = ua.NodeId(ua.ObjectIds.AuditEventType)
+    del nodes[other]
+    assert other not in nodes and nodes.get(other) is None and len(nodes) == len(built.iserver.aspace._nodes) - 1
+    with pytest.raises(KeyError):
+        nodes[other]
+    # A client browsing the type tree gets what a built server answers.
+    async def names(server: Server) -> list[str]:
+        children = await server.get_node(ua.ObjectIds.BaseDataVariableType).get_children()
+        return sorted([(await child.read_browse_name()).Name for child in children])
+
+    children = await names(loaded)
+    assert children == await names(built) and "DataItemType" in children and len(children) > 10
+
+
+async def test_a_cache_of_the_earlier_whole_format_is_replaced(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    path = cache_path()
+    earlier = path.with_name(path.name.replace("-lazy1-", "-"))
+    assert earlier != path
+    earlier.parent.mkdir(parents=True, mode=0o700)
+    earlier.write_bytes(b"the nodes pickled whole")
+    await _started(path)
+    assert path.is_file() and not earlier.exists()
