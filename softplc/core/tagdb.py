@@ -29,7 +29,7 @@ import logging
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Any
 
-from softplc.core.datatypes import TypeMismatch
+from softplc.core.datatypes import DataType, TypeMismatch
 from softplc.core.forcing import Force, ForceChange, Forces
 from softplc.core.origin import Origin, origin_of
 from softplc.core.plant_role import RoleHolder
@@ -40,6 +40,8 @@ from softplc.core.writes import KEEP_VALUE, Rule, Write, WriteEvent, WriteReject
 __all__ = ["KEEP_VALUE", "Origin", "Rule", "TagDatabase", "Write", "WriteEvent", "WriteRejected", "origin_of"]  # writes.py's too: the API of one place
 
 log = logging.getLogger(__name__)
+
+_PLAIN = {DataType.FLOAT64: float, DataType.BOOL: bool}
 
 
 ChangeCallback = Callable[[Sequence[Tag]], None]
@@ -58,6 +60,12 @@ class TagDatabase:
             if definition.name in self._tags:
                 raise ValueError(f"duplicate tag {definition.name!r}")
             self._tags[definition.name] = Tag(definition, start)
+        # Tags whose every value of one Python type is valid as it is (a float64 or a bool
+        # without bounds): the runtime's own writes of that type need no conversion (`validate`).
+        self._plain: dict[str, type] = {
+            tag.name: plain for tag in self._tags.values()
+            if (plain := _PLAIN.get(tag.definition.type)) is not None and tag.definition.min is None and tag.definition.max is None
+        }
         self._journal: list[Write | ForceChange] = []
         self._callbacks: list[ChangeCallback] = []
         self._write_callbacks: list[WriteCallback] = []
@@ -107,6 +115,8 @@ class TagDatabase:
         `role` is the writer's (see `softplc.core.roles`); `None` is code inside the runtime
         (programs, drivers), to which no access rule applies.
         """
+        if role is None and type(value) is self._plain.get(name):
+            return value  # what `coerce` would return: a robot's position, a program's flag
         tag = self._tags.get(name)
         if tag is None:
             raise WriteRejected(name, Rule.UNKNOWN_TAG, "no such tag")

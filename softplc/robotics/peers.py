@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+SMALL_FLEET = 16  # robots below which `near` computes with Python floats, not arrays
 GRID_FROM = 64  # robots from which `near` looks in grid cells instead of at every robot
 GRID_CELL = 3.0  # metres, a cell's side: a robot's sense range (traffic.py) spans 2-3 cells
 
@@ -131,6 +132,12 @@ class PeerView:
         if not self.ids:
             return []
         me = self.index.get(robot_id)
+        if len(self.ids) < SMALL_FLEET:
+            # A few robots: plain floats beat the arrays' per-call cost (~8 µs of a ~40 µs step).
+            distances = [math.hypot(px - x, py - y) for px, py in zip(self.x.tolist(), self.y.tolist())]
+            near = [(distance, c) for c, distance in enumerate(distances) if distance <= within and c != me]
+            near.sort()
+            return [self.peer(c) for _, c in near]
         if len(self.ids) < GRID_FROM:
             distance = np.hypot(self.x - x, self.y - y)
             result = [int(c) for c in np.nonzero(distance <= within)[0] if c != me]

@@ -64,6 +64,47 @@ async def test_drive_until_stops_at_the_limit() -> None:
     sleeper.cancel()
 
 
+async def test_sockets_are_served_while_simulated_time_runs_and_polling_is_restored_after() -> None:
+    # As fast as possible the loop is never idle: I/O is polled every few turns, not every one.
+    clock = SimClock()
+    loop = asyncio.get_running_loop()
+    selector = loop._selector  # type: ignore[attr-defined]
+    answers: list[bytes] = []
+
+    async def echo(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        writer.write(await reader.readline())
+        await writer.drain()
+        writer.close()
+
+    server = await asyncio.start_server(echo, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+
+    async def ticking() -> None:  # keeps simulated time running: the loop always has a turn ready
+        while True:
+            await clock.sleep(0.001)
+
+    async def client() -> None:
+        for index in range(20):
+            reader, writer = await asyncio.open_connection("127.0.0.1", port)
+            writer.write(b"ping %d\n" % index)
+            answers.append(await reader.readline())
+            writer.close()
+
+    driver = asyncio.create_task(clock.drive())
+    ticker = asyncio.create_task(ticking())
+    await asyncio.sleep(0)
+    assert "select" in vars(selector)  # the sparse poll is in place while time runs
+    async with asyncio.timeout(10):
+        await client()
+    assert answers == [b"ping %d\n" % index for index in range(20)] and clock.now() > 0
+    ticker.cancel()
+    driver.cancel()
+    await asyncio.gather(driver, ticker, return_exceptions=True)
+    assert "select" not in vars(selector)  # the loop's own poll again
+    server.close()
+    await server.wait_closed()
+
+
 async def test_sim_clock_with_speed_runs_about_n_times_real_time() -> None:
     """Bounded check, not a timing goal: never faster than speed N, not grossly slower."""
     clock = SimClock(speed=20)

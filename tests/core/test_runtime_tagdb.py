@@ -94,6 +94,23 @@ def test_validate_applies_every_rule() -> None:
     assert db.validate("status", "ok", role=None) == "ok"  # programs may write ro tags
 
 
+def test_the_runtimes_own_writes_of_the_exact_type_are_taken_as_they_are_and_the_rest_still_checked() -> None:
+    db = TagDatabase([TagDef("x", DataType.FLOAT64, 0.0), TagDef("on", DataType.BOOL, False),
+                      TagDef("bounded", DataType.FLOAT64, 0.0, min=0.0, max=1.0), TagDef("n", DataType.INT16, 0)], now=lambda: 0.0)
+    assert db.validate("x", math.nan, role=None) != db.validate("x", math.nan, role=None)  # NaN, as coerce gives it
+    assert db.validate("x", 2.5, role=None) == 2.5 and db.validate("on", True, role=None) is True
+    converted = db.validate("x", np.float64(0.5), role=None)  # a float subclass: converted to a plain float
+    assert converted == 0.5 and type(converted) is float
+    assert db.validate("x", 3, role=None) == 3.0 and type(db.validate("x", 3, role=None)) is float
+    assert db.validate("on", 1, role=None) is True
+    for name, value, rule in (("bounded", 1.5, Rule.OUT_OF_RANGE), ("bounded", math.nan, Rule.OUT_OF_RANGE),
+                              ("on", 2, Rule.TYPE_MISMATCH), ("x", "1", Rule.TYPE_MISMATCH), ("n", 1.5, Rule.TYPE_MISMATCH),
+                              ("n", 40_000, Rule.TYPE_MISMATCH)):
+        with pytest.raises(WriteRejected) as raised:
+            db.validate(name, value, role=None)
+        assert raised.value.rule is rule, (name, value)
+
+
 def test_submit_journals_valid_items_and_applies_them_together_in_order() -> None:
     db = make_db()
     changes: list[list[str]] = []

@@ -8,7 +8,7 @@ import random
 import pytest
 
 from softplc.robotics import peers as peers_module
-from softplc.robotics.peers import GRID_FROM, PeerView
+from softplc.robotics.peers import GRID_FROM, SMALL_FLEET, PeerView
 
 
 def _fleet(count: int, seed: int) -> PeerView:
@@ -22,6 +22,17 @@ def _fleet(count: int, seed: int) -> PeerView:
         row[0], row[1] = 10.0 + rng.choice([-1e-12, 0.0, 1e-12]), 2.0
     rows[30][0] = math.nan
     rows[31][1] = math.inf
+    return PeerView(ids, rows)
+
+
+def _small_fleet(count: int, seed: int) -> PeerView:
+    rng = random.Random(seed)
+    ids = [f"r{index:02d}" for index in range(count)]
+    rows = [[rng.uniform(0, 6), rng.uniform(0, 4), 0.0, 0.0, "moving", 0.2, "", ""] for _ in ids]
+    rows[1][0], rows[1][1] = rows[2][0], rows[2][1] = 3.0, 2.0  # a tie
+    rows[-1][0] = math.nan
+    if count > 4:
+        rows[-2][1] = math.inf
     return PeerView(ids, rows)
 
 
@@ -66,3 +77,16 @@ def test_a_small_fleet_needs_no_grid(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(PeerView, "_within_cells", lambda *args: pytest.fail("a small fleet looked in the grid"))
     assert [peer.id for peer in view.near("r0000", 4.0, 6.0, 3.0)] == _brute(view, "r0000", 4.0, 6.0, 3.0)
     assert peers_module.GRID_FROM == GRID_FROM
+
+
+@pytest.mark.parametrize("count", [3, SMALL_FLEET - 1, SMALL_FLEET, GRID_FROM - 1])
+def test_fleets_of_every_size_find_the_neighbours_the_definition_finds(count: int) -> None:
+    view = _small_fleet(count, count)
+    rng = random.Random(count)
+    queries = [(view.ids[rng.randrange(count)], rng.uniform(-1, 7), rng.uniform(-1, 5), rng.choice([0.0, 0.5, 2.0, 3.0]))
+               for _ in range(200)]
+    queries += [(view.ids[0], 3.0, 2.0, 0.0), (view.ids[0], 3.0, 2.0, math.inf), (view.ids[0], math.nan, 1.0, 3.0),
+                (view.ids[1], 1.0, 1.0, -1.0), ("nobody", 3.0, 2.0, 1.0)]
+    for robot_id, x, y, within in queries:
+        got = [peer.id for peer in view.near(robot_id, x, y, within)]
+        assert got == _brute(view, robot_id, x, y, within), (robot_id, x, y, within)
