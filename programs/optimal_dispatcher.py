@@ -25,12 +25,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from programs.bindings import check_lengths
 from programs.compatibility import compatible_numbers, team_sizes
 from programs.teams import NO_LIMIT, members
 from softplc import Input, Output, Param, Program
+from softplc.util.assignment import linear_sum_assignment  # scipy.optimize's, without the rest of scipy.optimize
 
 IDLE = 0
 HEADING_TO_SOURCE = (1, 2)

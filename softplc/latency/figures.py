@@ -4,16 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure  # made directly, not through pyplot: files only, no backend or display
 
-matplotlib.use("Agg")  # headless: files only, no display
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from softplc.latency.report import hires_delays, plc_delays  # noqa: E402
-from softplc.latency.results import Measurement  # noqa: E402
-from softplc.latency.statistics import DelayStatistics, summarize  # noqa: E402
+from softplc.latency.report import hires_delays, plc_delays
+from softplc.latency.results import Measurement
+from softplc.latency.statistics import DelayStatistics, summarize
 
 
 def figure_name(run: Measurement) -> str:
@@ -27,8 +24,8 @@ def write_figure(run: Measurement, directory: Path) -> Path:
     rows = [("PLC delay, scan-quantised", plc, run.target.scan * 1000.0)]
     if hires:
         rows.append(("Ready → TaskID acknowledged, high resolution", hires, None))
-    figure, axes = plt.subplots(len(rows), 2, figsize=(12, 3.6 * len(rows)), squeeze=False,
-                                gridspec_kw={"width_ratios": [2.2, 1]})
+    figure = Figure(figsize=(12, 3.6 * len(rows)))
+    axes = figure.subplots(len(rows), 2, squeeze=False, gridspec_kw={"width_ratios": [2.2, 1]})
     for (title, values, category), (over_time, distribution) in zip(rows, axes):
         stats = summarize(values)
         _over_time(over_time, values, stats, title)
@@ -39,11 +36,10 @@ def write_figure(run: Measurement, directory: Path) -> Path:
     figure.tight_layout()
     path = directory / figure_name(run)
     figure.savefig(path, dpi=110)
-    plt.close(figure)
     return path
 
 
-def _over_time(axis: plt.Axes, values: list[float], stats: DelayStatistics, title: str) -> None:
+def _over_time(axis: Axes, values: list[float], stats: DelayStatistics, title: str) -> None:
     axis.set_title(title, fontsize=10)
     axis.set_xlabel("sample")
     axis.set_ylabel("delay (ms)")
@@ -61,7 +57,7 @@ def _over_time(axis: plt.Axes, values: list[float], stats: DelayStatistics, titl
     axis.grid(alpha=0.3)
 
 
-def _distribution(axis: plt.Axes, values: list[float], stats: DelayStatistics, category: float | None) -> None:
+def _distribution(axis: Axes, values: list[float], stats: DelayStatistics, category: float | None) -> None:
     axis.set_title("frequency distribution", fontsize=10)
     axis.set_xlabel("delay (ms)")
     axis.set_ylabel("% of samples")

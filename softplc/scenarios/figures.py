@@ -12,13 +12,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+# Figures made directly, not through pyplot: no backend to choose, no figure manager to close,
+# and ~0.1 s less of imports per scenario run (matplotlib's own documented way for servers).
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
-
-from softplc.scenarios.recorder import Recorder  # noqa: E402
-from softplc.scenarios.spec import Scenario  # noqa: E402
+from softplc.scenarios.recorder import Recorder
+from softplc.scenarios.spec import Scenario
 
 TASK_COLOURS = ["tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown"]
 ROBOT_COLOURS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown"]
@@ -45,7 +44,8 @@ def draw_levels(scenario: Scenario, recorder: Recorder, path: Path) -> None:
     lev = _columns(recorder.lev_header, recorder.lev)
     tsk = _columns(recorder.tsk_header, recorder.tsk)
     count = len(scenario.tasks)
-    figure, (left, right) = plt.subplots(1, 2, figsize=(13, 4.6))
+    figure = Figure(figsize=(13, 4.6))
+    left, right = figure.subplots(1, 2)
     time = lev["time"]
     for n in range(1, count + 1):
         colour = TASK_COLOURS[(n - 1) % len(TASK_COLOURS)]
@@ -87,7 +87,6 @@ def draw_levels(scenario: Scenario, recorder: Recorder, path: Path) -> None:
     figure.suptitle(scenario.title, fontsize="medium")
     figure.tight_layout()
     figure.savefig(path, dpi=100, metadata=PNG_METADATA)
-    plt.close(figure)
 
 
 def _legend(axis: Any, twin: Any) -> None:
@@ -99,7 +98,8 @@ def _legend(axis: Any, twin: Any) -> None:
 def draw_paths(scenario: Scenario, recorder: Recorder, path: Path, grid: Any = None) -> None:
     """x/y of every robot over the map (occupied cells dark), stations marked."""
     xy = _columns(recorder.xy_header, recorder.xy)
-    figure, axis = plt.subplots(figsize=(12, 5.2))
+    figure = Figure(figsize=(12, 5.2))
+    axis = figure.subplots()
     if grid is not None:
         width, height = grid.width * grid.resolution, grid.height * grid.resolution
         axis.imshow(grid.occupied, origin="lower", cmap="Greys", vmin=0, vmax=1.6, interpolation="nearest",
@@ -121,4 +121,3 @@ def draw_paths(scenario: Scenario, recorder: Recorder, path: Path, grid: Any = N
     axis.grid(alpha=0.2)
     figure.tight_layout()
     figure.savefig(path, dpi=100, metadata=PNG_METADATA)
-    plt.close(figure)
