@@ -24,7 +24,7 @@ from softplc.robotics.controller import SpeedLimits
 from softplc.robotics.driver import Command, DriverSettings, Report, RobotDriver
 from softplc.robotics.floor import Floor
 from softplc.robotics.gridmap import OccupancyGrid, load_map
-from softplc.robotics.loop import ControlLoop, LoopStats, Sample
+from softplc.robotics.loop import ControlLoop, LoopStats, Sample, run_together
 from softplc.robotics.peers import PEER_TAGS, PeerView
 from softplc.robotics.planner import PathPlanner
 from softplc.robotics.planning import ClockPlanning, Planning, ProcessPlanning
@@ -198,17 +198,22 @@ class FleetAdapter:
             self._planning = ProcessPlanning(planners, planning)
             await self._planning.start()
             planning = self._planning
+        slots: dict[int, list[ControlLoop]] = {}
         for index, robot in enumerate(sim):
             pose = Pose(float(db.value(f"{robot.id}_xpos")), float(db.value(f"{robot.id}_ypos")), float(db.value(f"{robot.id}_heading")))
             driver = RobotDriver(robot, self.floor, limits[robot.id], self.driver_settings, cycle=self.cycle, pose=pose)
             record = self.trajectories.setdefault(robot.id, []) if self.record else None
             io = TagIO(db, robot.id, peers)
             io.driver = driver
-            loop = ControlLoop(driver, io, plant.clock, self.cycle,
-                               phase=(index % PHASES) * self.cycle / PHASES, record=record, planning=planning)
+            slot = index % PHASES
+            loop = ControlLoop(driver, io, plant.clock, self.cycle, phase=slot * self.cycle / PHASES, record=record, planning=planning)
             self.drivers[robot.id] = driver
             self.loops[robot.id] = loop
-            self._tasks.append(plant.spawn(loop.run(), f"robot-{robot.id}"))
+            slots.setdefault(slot, []).append(loop)
+        for slot, loops in sorted(slots.items()):
+            # The robots of one slot step one after the other in one task (in the order of the robots file).
+            name = f"robot-{loops[0].driver.spec.id}" if len(loops) == 1 else f"robots-phase-{slot}"
+            self._tasks.append(plant.spawn(run_together(loops, plant.clock, self.cycle, loops[0].phase), name))
         for robot in self.robots:
             if robot.driver is DriverKind.REMOTE:
                 link = RemoteLink(db, robot, plant.clock.now, self.heartbeat_timeout)

@@ -193,3 +193,32 @@ async def test_missing_robot_tags_are_a_clear_start_error(tmp_path: Path) -> Non
     with pytest.raises(AdapterError, match=r"robots.yaml:\d+:\d+: robot r01 starts at \(12.5, 4.3\), which is not free floor"):
         await plant.runtime.start()
     await plant.runtime.stop()
+
+
+async def test_robots_of_one_phase_share_a_task_and_each_keeps_its_own_cycle(tmp_path: Path) -> None:
+    # 12 robots in ten phase slots: r01 and r11, r02 and r12 step in one task each, one after the other.
+    resolution = 0.05
+    occupied = np.zeros((int(14 / resolution), int(30 / resolution)), dtype=bool)
+    occupied[:2, :] = occupied[-2:, :] = occupied[:, :2] = occupied[:, -2:] = True
+    hall = OccupancyGrid(occupied, resolution)
+    robots = [(f"r{n:02d}", 2.0 + 2.2 * ((n - 1) % 12), 2.0) for n in range(1, 13)]
+    traces = []
+    for run in range(2):
+        directory = tmp_path / str(run)
+        directory.mkdir()
+        tagdb = write_plant(directory, [robot_yaml(r, x, y, math.pi / 2) for r, x, y in robots])
+        async with Plant(tagdb, hall) as plant:
+            assert len(plant.fleet._tasks) == 10 and len(plant.fleet.loops) == 12
+            for robot_id, x, _ in robots:
+                plant.send(robot_id, x, 10.0)
+            await plant.run_until(lambda: plant.idle(*[r for r, *_ in robots]), limit=120)
+            for robot_id, x, _ in robots:
+                assert plant.db.value(f"{robot_id}_navstate") == "arrived", plant.db.value(f"{robot_id}_navreason")
+                assert math.dist((plant.db.value(f"{robot_id}_xpos"), plant.db.value(f"{robot_id}_ypos")), (x, 10.0)) < 0.5
+            traces.append({r: plant.fleet.trajectory(r) for r, *_ in robots})
+            stats = plant.fleet.stats()
+            assert stats["r01"].cycles == stats["r11"].cycles and stats["r01"].overruns == 0
+    assert traces[0] == traces[1]
+    first, eleventh, second = ([s.t for s in traces[0][r]] for r in ("r01", "r11", "r02"))
+    assert first == eleventh and np.allclose(np.diff(first), 0.1)  # one slot: the same instants
+    assert second[0] - first[0] == pytest.approx(0.01)  # the next slot, a tenth of a cycle later
