@@ -12,7 +12,6 @@ import asyncio
 import contextlib
 import heapq
 import itertools
-import select
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Awaitable, Callable, Iterator
@@ -143,7 +142,7 @@ class RealClock(Clock):
                 # (--rt-priority), and Linux then throttles it for 50 ms every second.
                 # Only an idle loop naps: a nap between the steps of a request's callback chain
                 # (data received → task → reply) made every server reply 1 ms slower at a 1 ms scan.
-                _nap(min(remaining, _NAP))
+                time.sleep(min(remaining, _NAP))
 
     async def run_blocking(self, function: Callable[..., T], *args: Any) -> T:
         return await asyncio.get_running_loop().run_in_executor(None, function, *args)
@@ -292,27 +291,6 @@ def _sparse_polling(loop: asyncio.AbstractEventLoop, sparse: bool) -> Iterator[N
         yield
     finally:
         del selector.select
-
-
-def _nap(seconds: float) -> None:
-    """Block up to `seconds`, less when the running loop has I/O to handle (a request, a reply).
-
-    Waits on the readiness of the loop's own epoll object (readable when any socket the loop
-    watches has an event), with select()'s microsecond timeout: epoll_wait's own timeout is whole
-    milliseconds. A request that arrives during the nap then ends it, instead of waiting up to
-    0.2 ms for each loop turn it needs (data received, the request's task, the reply). Loops
-    without a visible epoll object (uvloop, other systems) nap in `time.sleep`.
-    """
-    selector = getattr(asyncio.get_running_loop(), "_selector", None)
-    poller = getattr(selector, "_selector", None)  # asyncio's EpollSelector keeps its select.epoll here
-    fileno = getattr(poller, "fileno", None)
-    if fileno is not None:
-        try:
-            select.select([fileno()], [], [], seconds)
-            return
-        except (OSError, ValueError):  # closed, or a descriptor select() cannot take
-            pass
-    time.sleep(seconds)
 
 
 def _has_ready_callbacks() -> bool:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import socket
 import threading
 import time
 
@@ -223,29 +222,3 @@ async def test_a_zero_sleep_on_the_real_clock_lets_others_run() -> None:
     assert ran == [True]
     await task
 
-
-async def test_a_nap_before_a_release_ends_when_the_loop_has_io() -> None:
-    from softplc.core.clock import _nap
-
-    loop = asyncio.get_running_loop()
-    ours, theirs = socket.socketpair()
-    ours.setblocking(False)
-    received: list[bytes] = []
-    loop.add_reader(ours.fileno(), lambda: received.append(ours.recv(100)))
-    try:
-        started = time.monotonic()
-        _nap(0.05)  # nothing to read: the whole nap
-        assert time.monotonic() - started >= 0.045
-        threading.Timer(0.05, theirs.send, args=(b"request",)).start()
-        started = time.monotonic()
-        _nap(12.0)  # ends when the request arrives, not after 12 s
-        assert time.monotonic() - started < 10.0 and not received  # the loop has not run yet: it will now
-        for _ in range(10):
-            if received:
-                break
-            await asyncio.sleep(0)
-        assert received == [b"request"]
-    finally:
-        loop.remove_reader(ours.fileno())
-        ours.close()
-        theirs.close()
