@@ -13,8 +13,8 @@ import asyncio
 import logging
 import math
 import time
-from dataclasses import dataclass, field
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Protocol
 
 from softplc.core.clock import Clock

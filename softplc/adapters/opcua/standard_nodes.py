@@ -85,7 +85,7 @@ class LazyNodes(dict):  # type: ignore[type-arg]
 
     def pop(self, key: Any, *default: Any) -> Any:
         if key in self._pickled:
-            self[key]  # noqa: B018 — unpickled, then popped like any other
+            self[key]  # unpickled, then popped like any other
         return dict.pop(self, key, *default)
 
     def __iter__(self) -> Iterator[Any]:
