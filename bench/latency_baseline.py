@@ -9,7 +9,8 @@ For one scenario and scan it measures, one after the other on this machine:
 Around the OPC UA run (half before, half after, so a change of the machine's load during the run
 weighs on both) it measures the floor at the same scan (bench/opcua_roundtrip.py --floor): what one
 handshake costs at least over OPC UA — the mean delivery of a sparse change plus the mean round
-trip of one Write of the answer's shape at the same pace (one every 100 ms, as the answers go), by
+trip of one Write of the answer's shape at the pace of the changes (one every 100 ms; the answers come
+100-500 ms apart), by
 a bare asyncua client against `softplc run`; the ratio against back-to-back writes too. It prints
 Table 8 for all three beside the thesis, the floor and the ratios (of means, the goals; of
 medians too, which a busy machine's stalls shift less), then checks the goals:

@@ -21,7 +21,7 @@ bench/latency_baseline.py compares softplc's handshake with, in the same run): t
 of a sparse change (a tag the task stamps with its scan's monotonic time every 100 ms → the
 PublishResult in the client's publish loop, before any dispatch) plus the mean round trip of one
 Write of a uint16 and a bool (the answer's shape), both by a bare asyncua client. The writes go at
-the pace of the changes (one every 100 ms), as a handshake's answers do: a write right after
+the pace of the changes (one every 100 ms; a handshake's answers come 100-500 ms apart): a write right after
 the previous one, with both processes' CPUs still awake, took 0.4-0.6 ms on this machine, one
 after 100 ms of quiet 1.3 ms (2026-11-27) — measured back-to-back, the floor would hold the
 handshake to a speed no handshake client has. The back-to-back mean is printed beside it.
