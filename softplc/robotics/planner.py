@@ -91,10 +91,11 @@ class PathPlanner:
         self._static = bytearray(self._padded.ravel().astype(np.uint8).tobytes())
         self._labels = derived("regions8", blocked, lambda: _regions(blocked))
         s = self._stride
+        # (offset, cost, side a, side b): diagonal moves carry the two orthogonal steps they pass
+        # between (no corner cutting); straight ones have no sides (0).
         self._moves = [
-            (1, 1.0, 0), (-1, 1.0, 0), (s, 1.0, 0), (-s, 1.0, 0),
-            # Diagonal moves carry the two orthogonal steps they pass between (no corner cutting).
-            (s + 1, SQRT2, (1, s)), (s - 1, SQRT2, (-1, s)), (-s + 1, SQRT2, (1, -s)), (-s - 1, SQRT2, (-1, -s)),
+            (1, 1.0, 0, 0), (-1, 1.0, 0, 0), (s, 1.0, 0, 0), (-s, 1.0, 0, 0),
+            (s + 1, SQRT2, 1, s), (s - 1, SQRT2, -1, s), (-s + 1, SQRT2, 1, -s), (-s - 1, SQRT2, -1, -s),
         ]
 
     # -- cells ---------------------------------------------------------------------------
@@ -209,11 +210,11 @@ class PathPlanner:
                     path.append(start)
                 length = sum(math.dist(a, b) for a, b in zip(path, path[1:]))
                 return Plan(True, path, length=length, expanded=len(settled))
-            for offset, step, sides in self._moves:
+            for offset, step, side_a, side_b in self._moves:
                 neighbour = current + offset
                 if blocked[neighbour] or neighbour in settled:
                     continue
-                if sides and (blocked[current + sides[0]] or blocked[current + sides[1]]):
+                if side_a and (blocked[current + side_a] or blocked[current + side_b]):
                     continue
                 new_cost = distance + step
                 if new_cost < cost.get(neighbour, math.inf):
@@ -302,10 +303,10 @@ class PathPlanner:
         g_cost = [math.inf] * size
         parent = [-1] * size
         closed = bytearray(size)
-        extra = [0.0] * size
+        extra = [0.0] * size if penalty else []  # read only when there is a penalty
         for index, cost in penalty.items():
             extra[index] = cost
-        moves = [(offset, step, sides[0] if sides else 0, sides[1] if sides else 0) for offset, step, sides in self._moves]
+        moves = self._moves
         g_cost[start] = 0.0
         heap: list[tuple[float, float, int]] = [(0.0, 0.0, start)]
         expanded = 0
