@@ -4,7 +4,7 @@ A real `softplc run` child serves Modbus TCP; a pymodbus client writes 1, 2, 3..
 int32 tag, each write acknowledged before the next (a few thousand writes a second). The test
 kills the child with SIGKILL in the middle of it, then checks on SQLite and on PostgreSQL that
 the store is intact, that every write recorded is there without a gap from the first one on,
-and that the last one recorded was acknowledged at most the flush period before the kill.
+and that the writes acknowledged but not recorded span at most the flush period.
 """
 
 from __future__ import annotations
@@ -125,7 +125,15 @@ def test_kill_9_during_a_write_flood_keeps_every_write_before_the_last_flush(bac
     assert all(entry.accepted and entry.source == "modbus" and entry.peer.startswith("127.0.0.1:") for entry in entries)
     assert len(values) >= 100
     when = dict(acknowledged)
-    lost = killed_at - when[values[-1]]
+    # What is lost is the writes the server acknowledged and the store does not have: from the last
+    # recorded one to the last one acknowledged before the kill. A stretch at the end where the child
+    # got no CPU and acknowledged nothing (its flush timer starved with it) loses nothing and is
+    # reported, not counted.
+    last_acknowledged = max(at for _, at in acknowledged if at <= killed_at)
+    lost = last_acknowledged - when[values[-1]]
     print(f"{backend}: {len(acknowledged)} writes acknowledged, {len(values)} recorded; the last recorded one was "
-          f"acknowledged {lost:.3f} s before the kill (flush period {FLUSH} s)")
-    assert lost <= FLUSH + COMMIT_ALLOWANCE, f"lost {lost:.3f} s of the audit trail, more than the flush period {FLUSH} s (+{COMMIT_ALLOWANCE} s)"
+          f"acknowledged {lost:.3f} s before the last acknowledged write, {killed_at - when[values[-1]]:.3f} s before "
+          f"the kill (flush period {FLUSH} s)")
+    assert lost <= FLUSH + COMMIT_ALLOWANCE, (
+        f"lost {lost:.3f} s of acknowledged writes ({sum(when[values[-1]] < at <= last_acknowledged for _, at in acknowledged)} "
+        f"writes), more than the flush period {FLUSH} s (+{COMMIT_ALLOWANCE} s)")
