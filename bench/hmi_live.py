@@ -44,6 +44,7 @@ import json
 import os
 import random
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -379,6 +380,8 @@ async def main(args: argparse.Namespace) -> None:
             runtime.wait(30)
         except subprocess.TimeoutExpired:
             runtime.kill()
+            runtime.wait()
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def report(args: argparse.Namespace, baseline: dict, loaded: dict, reports: list[dict], written: dict[int, float],

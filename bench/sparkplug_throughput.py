@@ -226,7 +226,7 @@ def main() -> int:
         with tempfile.TemporaryDirectory(prefix="softplc-sparkplug-") as directory:
             result = asyncio.run(measure(args, Path(directory), broker.port))
     finally:
-        broker.stop()
+        broker.remove()
     latency = result["latency"]
     what = "baseline, no edge node" if args.baseline else f"Sparkplug B, {args.devices} devices"
     print(f"{what}: {args.tags} tags every {args.interval}, {args.seconds:g} s measured (load before {load_before}, after {load_average()})")

@@ -24,6 +24,7 @@ import asyncio
 import json
 import os
 import random
+import shutil
 import signal
 import sys
 import tempfile
@@ -227,7 +228,8 @@ async def run(args: argparse.Namespace) -> dict[str, float]:
         recording.cancel()
         await recorder.connection.close()
         await runtime.stop()
-        broker.stop()
+        broker.remove()
+        shutil.rmtree(directory, ignore_errors=True)
     return result
 
 

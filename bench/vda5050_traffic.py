@@ -21,6 +21,7 @@ import asyncio
 import json
 import math
 import random
+import shutil
 import sys
 import tempfile
 import textwrap
@@ -203,6 +204,7 @@ async def run(args: argparse.Namespace) -> dict[str, float]:
         figures["resends"] = sum(link.trip.resends for link in links.values() if link.trip is not None)
     finally:
         await runtime.stop()
+        shutil.rmtree(directory, ignore_errors=True)
     return figures
 
 

@@ -95,7 +95,7 @@ def mosquitto():
     try:
         yield server
     finally:
-        server.stop()
+        server.remove()
 
 
 def _test_server(make: Callable[[], Any], unavailable: type[Exception]) -> Any:

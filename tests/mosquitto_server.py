@@ -1,7 +1,7 @@
 """A real MQTT broker for the tests: Debian's mosquitto on a free loopback port, with a config file of our own.
 
 scripts/install-test-tools.sh installs it. `MosquittoServer(port)` can be stopped and started
-again on the same port (a broker restart); `extra` adds config lines (ACLs, a password file,
+again on the same port (a broker restart), `remove()` at the end deletes its folder; `extra` adds config lines (ACLs, a password file,
 a message size limit).
 """
 
@@ -63,3 +63,8 @@ class MosquittoServer:
             self.process.kill()
             self.process.wait(timeout=10)
         self.process = None
+
+    def remove(self) -> None:
+        """Stop the broker and delete its config and log: the end of its life."""
+        self.stop()
+        shutil.rmtree(self.directory, ignore_errors=True)

@@ -70,7 +70,7 @@ def secured(tmp_path: Path):
     try:
         yield server, tls_port, certs / "ca.pem"
     finally:
-        server.stop()
+        server.remove()
 
 
 def settings(port: int, ca: Path, user: str, password_file: Path) -> MqttSettings:
