@@ -6,6 +6,7 @@ longer; the wall-time benchmarks print both so the two can be told apart.
 
 from __future__ import annotations
 
+import compileall
 import os
 import resource
 import subprocess
@@ -24,8 +25,26 @@ class TimedRun:
     done: subprocess.CompletedProcess[str]
 
 
+_compiled = False
+
+
+def fresh_bytecode() -> None:
+    """Compile the modules changed since their last compile, as scripts/bootstrap.sh does.
+
+    Where PYTHONDONTWRITEBYTECODE is set (as on this machine), Python never saves bytecode, so a
+    module edited since the bootstrap is compiled again by every run: 0.75 s more per simulated
+    run with five edited modules (3.35 s instead of 2.59 s). A timing must not include that.
+    """
+    global _compiled
+    if not _compiled:
+        for folder in ("softplc", "programs", "robots"):
+            compileall.compile_dir(REPO / folder, quiet=1, workers=0)
+        _compiled = True
+
+
 def run_softplc(*args: str) -> TimedRun:
     """`python -m softplc.app.cli ARGS` from the repository, output captured; exits on failure."""
+    fresh_bytecode()
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.monotonic()
     done = subprocess.run([sys.executable, "-m", "softplc.app.cli", *args], capture_output=True, text=True, cwd=REPO,
