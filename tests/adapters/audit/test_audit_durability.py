@@ -37,6 +37,22 @@ FLUSH = 0.25  # s
 COMMIT_ALLOWANCE = 0.5
 
 
+def postgres_sessions(dsn: str, application: str) -> int:
+    """How many sessions of `application` the server has."""
+    import psycopg
+
+    with psycopg.connect(dsn, autocommit=True) as connection:
+        return connection.execute("SELECT count(*) FROM pg_stat_activity WHERE application_name = %s", (application,)).fetchone()[0]
+
+
+def postgres_sessions_left(dsn: str, application: str, timeout: float) -> int:
+    """Wait until no session of `application` is left on the server, at most `timeout` seconds; how many are."""
+    deadline = time.monotonic() + timeout
+    while (left := postgres_sessions(dsn, application)) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    return left
+
+
 def plant(section: str) -> str:
     return f"""
 version: 1
@@ -59,7 +75,8 @@ def test_kill_9_during_a_write_flood_keeps_every_write_before_the_last_flush(bac
         section, settings = "backend: sqlite", StorageSettings.sqlite(tmp_path / "state" / "audit.sqlite")
     else:
         dsn = request.getfixturevalue("postgres_dsn")
-        section, settings = f'backend: postgresql\n  dsn: "{dsn}"', StorageSettings.postgresql(dsn)
+        application = f"softplc-killed-{os.getpid()}-{time.monotonic_ns()}"  # names the runtime's sessions
+        section, settings = f'backend: postgresql\n  dsn: "{dsn} application_name={application}"', StorageSettings.postgresql(dsn)
     path = tmp_path / "tagdb.yaml"
     path.write_text(plant(section))
     address = ModbusAdapter(load_config(path), ModbusSettings(port=0)).map.by_tag["counter"].address
@@ -99,11 +116,17 @@ def test_kill_9_during_a_write_flood_keeps_every_write_before_the_last_flush(bac
         flooding = threading.Thread(target=flood, args=(port,), daemon=True)
         flooding.start()
         time.sleep(3.0)
+        if backend == "postgresql":
+            assert postgres_sessions(dsn, application) >= 1, "the runtime's audit writer has no session named by its DSN"
         killed_at = time.time()
         os.kill(child.pid, signal.SIGKILL)
         child.wait(timeout=30)
         stop.set()
         flooding.join(timeout=30)
+        if backend == "postgresql":
+            # A COMMIT the writer sent just before the kill is still carried out by the server: read
+            # the store once the killed runtime's sessions have ended, not while it commits.
+            assert not postgres_sessions_left(dsn, application, 30), "the killed runtime's PostgreSQL sessions did not end"
     finally:
         stop.set()
         if child.poll() is None:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 from conftest import REPO
+from processes import children_of, wait_gone
 
 from softplc.adapters.history.queries import HistoryReader
 from softplc.storage import Database, StorageError, StorageSettings
@@ -53,14 +54,6 @@ history:
   record:
     - {{tags: ["tick", "v*"]}}
 """
-
-
-def children_of(pid: int) -> list[int]:
-    """The processes `pid` started (Linux)."""
-    found = []
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        found += [int(text) for text in (task / "children").read_text().split()]
-    return found
 
 
 @pytest.mark.slow
@@ -105,10 +98,7 @@ def test_kill_9_under_heavy_recording_keeps_the_store_intact(backend: str, tmp_p
         os.kill(child.pid, signal.SIGKILL)
         child.wait(timeout=30)
         # The writer reads the end of its input, commits what it received and exits: it never outlives the runtime.
-        deadline = time.monotonic() + 30
-        while Path(f"/proc/{writers[0]}").exists() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert not Path(f"/proc/{writers[0]}").exists(), "the history writer's process outlived the runtime"
+        assert not wait_gone(writers, 30), "the history writer's process outlived the runtime"
     finally:
         if child.poll() is None:
             child.kill()
