@@ -27,31 +27,47 @@ async def wait_until(condition: Callable[[], bool], timeout: float, what: str) -
         await asyncio.sleep(0.01)
 
 
-async def test_a_10ms_task_misses_no_cycle_while_its_program_is_changed_online(tmp_path: Path) -> None:
-    """Three changes in a row; on a machine shared with other work a cycle may be missed for reasons
-    of its own, so the test asks that at least one change went by without any missed cycle (a change
-    that costs cycles costs them every time) — and that no change ever loses or repeats a scan."""
+async def test_a_10ms_task_keeps_scanning_while_its_program_is_changed_online(tmp_path: Path) -> None:
+    """Three changes in a row, each new version taking 0.6 s to import (as a big module might): the
+    10 ms task keeps scanning meanwhile — the check runs beside the event loop, not on it, where it
+    would stop the task for the whole 0.6 s — and no change ever loses or repeats a scan. (Whether
+    a cycle is missed here or there is the machine's load: bench/online_change.py measures that.)"""
     plant = Plant(tmp_path, RealClock())
     runtime = plant.runtime
     fast = runtime.tasks[0]
     await runtime.start()
     try:
         await wait_until(lambda: fast.stats.cycles >= 50, 10, "50 cycles of the 10 ms task")
-        missed = []
         for version in (2, 3, 4):
             old = runtime.program("mix")
-            overruns = fast.stats.overruns
             plant.edit(f"self.version = {version - 1}", f"self.version = {version}")
-            result = await plant.apply()
-            assert result["applied"] is True
+            plant.edit("from softplc import", f"import time as _slow_import  # {version}\n_slow_import.sleep(0.6)\nfrom softplc import")
+            cycles: list[tuple[float, int]] = []  # (when, the task's cycle count) while the change is checked
+
+            async def watch() -> None:
+                while True:
+                    cycles.append((time.monotonic(), fast.stats.cycles))
+                    await asyncio.sleep(0.005)
+
+            watcher = asyncio.create_task(watch())
+            started = time.monotonic()
+            try:
+                result = await plant.apply()
+            finally:
+                watcher.cancel()
+            took = time.monotonic() - started
+            assert result["applied"] is True and took >= 0.6
+            # The longest the loop stood still (between two of the watcher's turns): a moment on a
+            # loaded machine, not the 0.6 s the check takes.
+            still = max((later - since for (since, _), (later, _) in zip(cycles, cycles[1:])), default=0.0)
+            assert len(cycles) > 20 and still < 0.3, f"version {version}: the loop stood still for {still:.3f} s while the change was checked"
+            assert fast.stats.cycles - cycles[0][1] >= 20, f"version {version}: {fast.stats.cycles - cycles[0][1]} cycles in {took:.2f} s"
             swapped_at = fast.stats.cycles
             await wait_until(lambda: fast.stats.cycles >= swapped_at + 2, 10, "two more cycles")
-            missed.append(fast.stats.overruns - overruns)
             mix = runtime.program("mix")
             assert mix is not old and mix.version == version and plant.value("version") == version
             # every cycle scanned the program exactly once: its carried-over count is the task's cycle count
             assert mix.program.count == fast.stats.cycles == plant.value("scans")
-        assert 0 in missed, f"cycles missed while each change was checked and swapped: {missed}"
     finally:
         await runtime.stop()
 
