@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import os
+import shutil
 import signal
 import sys
 import tempfile
@@ -126,6 +127,7 @@ async def faults(args: argparse.Namespace) -> int:
         await observer.close()
         await pair.stop()
         etcd.remove()
+        shutil.rmtree(folder, ignore_errors=True)
     overlaps = pair.device.overlaps()
     print()
     print(f"faults: {sum(done.values())} ({', '.join(f'{k} {v}' for k, v in done.items())}); outputs recorded: {len(pair.device.outputs)}")
@@ -280,7 +282,9 @@ async def cost(args: argparse.Namespace) -> int:
                     standby.wait(timeout=20)
                 except subprocess.TimeoutExpired:
                     standby.kill()
+                    standby.wait()
             etcd.remove()
+            shutil.rmtree(folder, ignore_errors=True)
     interval = runtime.tasks[0].interval
     print(f"{args.tags} tags changing every {args.interval} cycle, {args.seconds:g} s with the standby then {args.seconds:g} s alone:")
     if costs:
