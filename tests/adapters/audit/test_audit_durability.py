@@ -37,20 +37,17 @@ FLUSH = 0.25  # s
 COMMIT_ALLOWANCE = 0.5
 
 
-def postgres_sessions(dsn: str, application: str) -> int:
-    """How many sessions of `application` the server has."""
+def postgres_sessions(dsn: str, application: str, *, gone_within: float = 0.0) -> int:
+    """How many sessions of `application` the server has — after waiting up to `gone_within` seconds for none."""
     import psycopg
 
+    deadline = time.monotonic() + gone_within
     with psycopg.connect(dsn, autocommit=True) as connection:
-        return connection.execute("SELECT count(*) FROM pg_stat_activity WHERE application_name = %s", (application,)).fetchone()[0]
-
-
-def postgres_sessions_left(dsn: str, application: str, timeout: float) -> int:
-    """Wait until no session of `application` is left on the server, at most `timeout` seconds; how many are."""
-    deadline = time.monotonic() + timeout
-    while (left := postgres_sessions(dsn, application)) and time.monotonic() < deadline:
-        time.sleep(0.02)
-    return left
+        while True:
+            left = connection.execute("SELECT count(*) FROM pg_stat_activity WHERE application_name = %s", (application,)).fetchone()[0]
+            if not left or time.monotonic() >= deadline:
+                return left
+            time.sleep(0.02)
 
 
 def plant(section: str) -> str:
@@ -126,7 +123,7 @@ def test_kill_9_during_a_write_flood_keeps_every_write_before_the_last_flush(bac
         if backend == "postgresql":
             # A COMMIT the writer sent just before the kill is still carried out by the server: read
             # the store once the killed runtime's sessions have ended, not while it commits.
-            assert not postgres_sessions_left(dsn, application, 30), "the killed runtime's PostgreSQL sessions did not end"
+            assert not postgres_sessions(dsn, application, gone_within=30), "the killed runtime's PostgreSQL sessions did not end"
     finally:
         stop.set()
         if child.poll() is None:
