@@ -304,6 +304,7 @@ class Link(ABC):
             if not self.plant.role.is_active():
                 return  # fenced since the change (a freeze in the middle of a scan): the new active writes
             items = [(self.bound[name], value) for name, value in batch.items()]
+            failed = False
             if items:
                 self._expecting(items)
                 try:
@@ -311,19 +312,34 @@ class Link(ABC):
                 except LinkError as error:
                     self.writes["failed"] += len(items)
                     for name, value in batch.items():
-                        self._pending.setdefault(name, value)  # sent again after the reconnect
+                        self._pending.setdefault(name, value)  # unless a newer value came meanwhile
                     log.debug("link %s: write failed: %s", self.name, error)
-                    return
-                self.took(items, answers)
+                    failed = True
+                else:
+                    self.took(items, answers)
             for name, value, origin in clients:
-                await self._send_for(origin, name, value)
+                if not await self._send_for(origin, name, value):
+                    failed = True
+            if failed:
+                # Sent again a period later while the link is up (a request that failed alone — an
+                # answer later than the timeout from a stalled remote, a service fault — leaves the
+                # connection up: no reconnect would ever send it), else after the reconnect.
+                await self.clock.sleep(self.settings.period)
 
-    async def _send_for(self, origin: Origin, name: str, value: Any) -> None:
-        """A client's write goes out as the `links.write` command in its name: the remote's answer is audited."""
+    async def _send_for(self, origin: Origin, name: str, value: Any) -> bool:
+        """A client's write goes out as the `links.write` command in its name: the remote's answer is audited.
+
+        False when it could not be sent (no answer in time, the link down): the tag holds the value
+        here, so it stays pending and goes out again as the runtime's, as after a reconnect."""
+        failed = self.writes["failed"]
         try:
             await self.plant.commands.call(WRITE_COMMAND, {"tag": name, "value": value}, origin)
         except CommandRefused as refused:
             log.debug("link %s: %s", self.name, refused)
+        if self.writes["failed"] > failed and self.db.value(name) == value:
+            self._pending.setdefault(name, value)
+            return False
+        return True
 
     async def write_one(self, bound: BoundTag, value: Any) -> str | None:
         """Send one value now; the remote's refusal, or None. Raises LinkError when the link is down."""

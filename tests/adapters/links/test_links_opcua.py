@@ -77,6 +77,35 @@ async def test_values_come_in_by_one_subscription_and_go_out(tmp_path: Path, rem
         await runtime.stop()
 
 
+async def test_a_write_request_that_fails_while_the_link_stays_up_is_sent_again(tmp_path: Path, remote: AsyncuaRemote) -> None:
+    # A remote that fails a Write request as a whole (a service fault; or an answer later than the
+    # timeout) while the connection stays up: no reconnect follows, so the link itself must send
+    # the value again (it stayed pending until the next local change: the remote never got it).
+    from asyncua.common.callback import CallbackType
+
+    faults = []
+
+    async def fail_once(event: object, dispatcher: object) -> None:
+        if not faults:
+            faults.append(event)
+            raise RuntimeError("a remote failing one Write request")  # asyncua answers BadInternalError
+
+    runtime = await start_plant(tmp_path, plant(remote))
+    db = runtime.db
+    try:
+        await wait_until(lambda: db["count"].quality is Quality.GOOD, what="the link up")
+        link = links_of(runtime).links["line2"]
+        remote.server.subscribe_server_callback(CallbackType.PreWrite, fail_once)
+        reconnects = db.value("_sys.links.line2.reconnects")
+        db.submit([("setpoint", 4242)], Origin("test", role=Role.OPERATOR))
+        await wait_until(lambda: link.writes["failed"] == 1, what="the failed write")
+        await wait_until(lambda: _read(remote, "Setpoint") == 4242, timeout=10, what="the value sent again")
+        assert len(faults) == 1 and db.value("_sys.links.line2.reconnects") == reconnects
+        assert db.value("setpoint") == 4242 and link.writes["ok"] >= 1
+    finally:
+        await runtime.stop()
+
+
 _values: dict[str, object] = {}
 
 
