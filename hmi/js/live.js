@@ -26,6 +26,8 @@ export class Live extends EventTarget {
     this._timer = null;
     this._pendingSubscribe = false;
     this._stopped = false;
+    this._subscriptionId = 0;         // the number of the last subscription sent ...
+    this._answeredId = -1;            // ... and of the last one the server said it applied (then its snapshot follows)
   }
 
   connect() {
@@ -134,7 +136,9 @@ export class Live extends EventTarget {
     if (!always && sent && sent.size === names.size && [...names.keys()].every((name) => sent.has(name))) return;
     this._subscribed = new Set(names.keys());
     this.synced = false;
-    socket.send(JSON.stringify({ type: 'subscribe', items: [...this._subscribed] }));
+    this._subscriptionId += 1;
+    if (always) this._answeredId = -1;  // a new socket: nothing answered on it yet
+    socket.send(JSON.stringify({ type: 'subscribe', items: [...this._subscribed], id: this._subscriptionId }));
   }
 
   _receive(text) {
@@ -163,12 +167,17 @@ export class Live extends EventTarget {
           changed.push(name);
         }
         this._notify(changed);
-        if (message.type === 'snapshot' && message.done) {
+        // Synced only by the snapshot of the current subscription: one sent for an earlier set
+        // (the shell's names, just before a view added its own) may arrive after the new request.
+        if (message.type === 'snapshot' && message.done && this._answeredId === this._subscriptionId) {
           this.synced = true;
           this.dispatchEvent(new CustomEvent('synced'));
         }
         break;
       }
+      case 'subscribed':
+        this._answeredId = message.id;
+        break;
       case 'ping':
         this._send({ type: 'pong' });
         break;

@@ -3,7 +3,8 @@
 Protocol (JSON text messages; docs/hmi.md):
 
     server → {"type": "hello", "instance": ID, "heartbeat": 2.0, "rate": 10, "user": ..., "role": ...}
-    client → {"type": "subscribe", "items": ["t01_iBL", "=t01_iBL > 90", ...]}   (replaces the set)
+    client → {"type": "subscribe", "items": ["t01_iBL", "=t01_iBL > 90", ...], "id": 7}   (replaces the set; id optional)
+    server → {"type": "subscribed", "id": 7}   when a subscription with an id is applied: the next snapshot is its own
     server → {"type": "snapshot", "time": 1767225600.1, "values": {"t01_iBL": 42.0, ...}, "done": true}
     server → {"type": "update", "time": T, "values": {...}, "times": {...}, "quality": {...}}
              only changed items, sent at once, each value at most `rate` times a second (fanout.py)
@@ -61,6 +62,12 @@ SILENCE = 2.5  # heartbeats without a word before a peer is taken for gone
 DISPATCH_SLICE = 1000  # changed tags sorted into groups per turn (~0.3 ms)
 TRY_AGAIN_LATER = 1013  # WebSocket close code of a refused connection (RFC 6455 registry: "Try Again Later")
 MAX_CLOSE_REASON = 123  # bytes of a close frame's reason
+MAX_ID = 2**53 - 1  # a subscription's id: a whole number JavaScript counts exactly
+
+
+def _subscription_id(value: Any) -> bool:
+    """Absent, or a whole number a page can count to (not a bool, a float or text)."""
+    return value is None or (type(value) is int and 0 <= value <= MAX_ID)
 
 
 class Hub:
@@ -317,6 +324,7 @@ class _Subscriber:
         self.hub = hub
         self.client = client
         self._wanted: list[str] | None = None
+        self._wanted_id: int | None = None  # the client's number of that subscription, echoed when applied
         self._timer: asyncio.TimerHandle | None = None
         self._last = 0.0
         self._joining: asyncio.Task[None] | None = None
@@ -336,8 +344,11 @@ class _Subscriber:
                 self.client.control({"type": "error", "message": "subscribe needs 'items': a list of names"})
             elif len(items) > MAX_ITEMS:
                 self.client.control({"type": "error", "message": f"at most {MAX_ITEMS} items in one subscription"})
+            elif not _subscription_id(message.get("id")):
+                self.client.control({"type": "error", "message": f"subscribe's 'id' must be a whole number from 0 to {MAX_ID}"})
             else:
                 self._wanted = list(dict.fromkeys(items))
+                self._wanted_id = message.get("id")
                 self._schedule()
         elif kind == "alarms":
             self._alarms(message.get("on", True))
@@ -366,6 +377,11 @@ class _Subscriber:
             return
         self._last = time.monotonic()
         unknown = self.hub.subscribe(self.client, wanted)
+        if self._wanted_id is not None:
+            # Queued with the resynchronisation, so it goes out after any snapshot of the previous set
+            # still being sent and before this set's: a page that subscribed twice in quick
+            # succession takes only the snapshot after it for its current set.
+            self.client.control({"type": "subscribed", "id": self._wanted_id})
         if unknown:
             self.client.control({"type": "unknown", "items": [clip(name) for name in unknown[:100]], "count": len(unknown)})
 

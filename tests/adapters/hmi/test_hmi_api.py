@@ -204,6 +204,28 @@ async def test_a_subscription_gets_a_snapshot_then_only_changes_at_most_rate_per
         assert 10 <= counters <= 2 * 10 + 3, (counters, stamps)
 
 
+async def test_numbered_subscriptions_say_which_snapshot_is_the_current_sets(plant: Plant) -> None:
+    # A page that asks for a second set right after a first (the shell's names, then a view's) may
+    # get the first set's snapshot after asking for the second: "subscribed" tells them apart.
+    sets = {1: {"counter"}, 2: {"counter", "limit"}, 3: {"limit", "=t01_iBL >= 80"}}
+    async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
+        for number, items in sets.items():
+            await ws.send_json({"type": "subscribe", "items": sorted(items), "id": number})
+        answered, snapshots = None, 0
+        while not (answered == 3 and snapshots):
+            message = await receive_until(ws, lambda message: message["type"] in ("subscribed", "snapshot"))
+            if message["type"] == "subscribed":
+                assert answered is None or message["id"] > answered, (answered, message)
+                answered, snapshots = message["id"], 0
+            else:  # one message of up to 500 items: the whole snapshot here
+                assert answered is not None and set(message["values"]) == sets[answered] and message["done"], (answered, message)
+                snapshots += 1
+        for wrong in ("7", True, -1, 2.5, 2**53):
+            await ws.send_json({"type": "subscribe", "items": ["counter"], "id": wrong})
+            error = await receive_until(ws, "error")
+            assert "'id' must be a whole number" in error["message"], (wrong, error)
+
+
 async def test_expressions_of_views_are_evaluated_on_the_server(plant: Plant) -> None:
     async with http_client() as session, session.ws_connect(plant.url + "api/live") as ws:
         await ws.send_json({"type": "subscribe", "items": ["=t01_iBM + t02_iBM", "=t01_iBL >= 80"]})

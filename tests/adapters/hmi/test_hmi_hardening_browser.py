@@ -31,6 +31,37 @@ pytestmark = pytest.mark.asyncio(loop_scope="module")
 GREEN = "rgb(26, 127, 55)"  # #1a7f37, the on_color of the test view's `state` (RUNNING)
 
 
+async def test_synced_means_the_snapshot_of_the_current_set_not_of_an_earlier_one(browser: Any, tmp_path: Path) -> None:
+    # The view test above failed once under load: `synced` came from the snapshot of the shell's
+    # names, sent before the view's names were asked for. Made to happen here: a second set asked
+    # for right after a first (the runtime applies one change per 0.1 s), then read when synced.
+    plant = await start_plant(tmp_path)
+    try:
+        context, page, errors = await open_page(browser, plant.url + "#/view/test")
+        await ready(page)
+        await page.wait_for_function("() => window.softplcHmi.live.synced")
+        result = await page.evaluate("""async () => {
+            const live = window.softplcHmi.live;
+            const pause = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+            const seen = [];
+            for (const [first, second] of [['note', 'flag'], ['t02_qSM', 't02_qSL']]) {
+              await pause(250);  // past the runtime's 0.1 s between two changes: the first goes at once
+              live.watch([first], () => {});
+              await pause(0);  // its subscription is sent (a microtask)
+              live.watch([second], () => {});
+              await pause(0);
+              while (!live.synced) await pause(1);
+              seen.push(live.values.has(second));
+            }
+            return seen;
+        }""")
+        assert result == [True, True], f"synced before the snapshot of the names watched: {result}"
+        assert not errors, errors
+        await context.close()
+    finally:
+        await plant.stop()
+
+
 async def test_a_view_opened_after_changes_nobody_watched_draws_current_expressions(browser: Any, tmp_path: Path) -> None:
     plant = await start_plant(tmp_path)
     try:
