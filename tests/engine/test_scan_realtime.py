@@ -61,8 +61,10 @@ async def test_an_overrun_skips_and_counts_missed_releases_and_never_bursts(real
     # each 35 ms scan in a 10 ms task passes 3 releases (4 if the machine hiccups): skipped, counted
     assert 3 * cycles <= overruns <= 5 * cycles, (cycles, overruns)
     # no burst: every cycle starts near a release on the original grid; a burst would start
-    # the late cycles straight after the previous one, 25 ms or more after their release
-    assert stats.latency.max < 0.020, stats.latency.max
+    # the late cycles straight after the previous one, 25 ms or more after their release — all
+    # 14 of them. One start late by the machine (40 ms once, beside the test suite's other
+    # workers on two cores) is not a burst: the 80th percentile of the 15 starts is on time.
+    assert stats.latency.percentile(80) < 0.020, (stats.latency.percentile(80), stats.latency.max)
     times = runtime.program("count").program.times
     gaps = [b - a for a, b in zip(times, times[1:])]
     assert min(gaps) >= 0.035
