@@ -136,8 +136,7 @@ export class Live extends EventTarget {
     if (!always && sent && sent.size === names.size && [...names.keys()].every((name) => sent.has(name))) return;
     this._subscribed = new Set(names.keys());
     this.synced = false;
-    this._subscriptionId += 1;
-    if (always) this._answeredId = -1;  // a new socket: nothing answered on it yet
+    this._subscriptionId += 1;  // only grows: an answer on an earlier socket never matches a later request
     socket.send(JSON.stringify({ type: 'subscribe', items: [...this._subscribed], id: this._subscriptionId }));
   }
 
