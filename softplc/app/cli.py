@@ -32,6 +32,7 @@ from softplc.util import logs
 from softplc.util.console import print_table
 from softplc.util.durations import format_duration
 from softplc.util.plurals import plural
+from softplc.util.realtime import cpu_list
 
 if TYPE_CHECKING:
     from softplc.engine.retain import RetainError
@@ -117,6 +118,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--rt-priority", type=int, metavar="N",
         help="run the scan loop under real-time scheduling (SCHED_FIFO, 1-99) so other processes "
         "cannot delay it; needs root or CAP_SYS_NICE",
+    )
+    run.add_argument(
+        "--cpus", type=cpu_list, metavar="LIST",
+        help="keep the runtime on these CPUs (e.g. 0, 0,2 or 2-3; Linux): a core of its own for the scan and its "
+        "servers, clear of the clients and other processes you pin elsewhere",
     )
     from softplc.app.adapters import add_run_arguments
 
@@ -261,6 +267,14 @@ def cmd_run(args: argparse.Namespace) -> int:
             print("softplc: --loop uvloop needs the uvloop package: pip install uvloop", file=sys.stderr)
             return EXIT_FAILURE
         loop_factory = uvloop.new_event_loop
+    if args.cpus is not None:
+        from softplc.util.realtime import RealtimeError, set_cpu_affinity
+
+        try:
+            set_cpu_affinity(args.cpus)
+        except RealtimeError as error:
+            print(f"softplc: --cpus: {error}", file=sys.stderr)
+            return EXIT_FAILURE
     if args.rt_priority is not None:
         from softplc.util.realtime import RealtimeError, set_realtime_priority
 

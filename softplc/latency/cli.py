@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from softplc.clients.login import LoginError, add_login_arguments, read_password
 from softplc.latency.plant import SCENARIO_NAMES, PlantMissing, scenario_durations
+from softplc.util.realtime import RealtimeError, check_cpus, cpu_list, set_cpu_affinity
 
 if TYPE_CHECKING:
     from softplc.latency.results import Measurement
@@ -90,6 +91,11 @@ def add_commands(commands: argparse._SubParsersAction) -> None:  # type: ignore[
                         help="wait this long for a Ready before counting a timeout "
                         "(default: the scenario's longest task + 1 s; must be longer than that task)")
     parser.add_argument("--loop", choices=("asyncio", "uvloop"), default="asyncio", help="event loop of our runtime (default asyncio)")
+    parser.add_argument("--cpus", type=cpu_list, metavar="LIST",
+                        help="keep our runtime on these CPUs (e.g. 0; Linux), as `softplc run --cpus`")
+    parser.add_argument("--client-cpus", type=cpu_list, metavar="LIST",
+                        help="keep the client process on these CPUs (e.g. 1): with --cpus, each side on a CPU of its "
+                        "own, as a soft PLC is deployed; left out, the operating system places both")
     parser.add_argument("--out", type=Path, metavar="DIR", help="write samples.csv, statistics.json, report.txt and PNG figures here")
     parser.add_argument("--json", action="store_true", help="print the statistics as JSON on stdout (the table goes to stderr)")
     parser.set_defaults(func=cmd_latency)
@@ -110,6 +116,14 @@ def targets(args: argparse.Namespace) -> list[Target]:
         parse_endpoint(args.endpoint, protocols[0])  # EndpointError (a ValueError) says what is wrong
     elif args.tag:
         raise ValueError("--tag is for --endpoint: our own handshake plant has its tags where the client expects them")
+    if args.cpus is not None and args.endpoint is not None:
+        raise ValueError("--cpus places our runtime, which --endpoint does not start: leave it out (--client-cpus places the client)")
+    for cpus in (args.cpus, args.client_cpus):
+        if cpus is not None:
+            try:
+                check_cpus(cpus)
+            except RealtimeError as error:
+                raise ValueError(str(error)) from None
     _check_tags(args.tag, protocols)
     if args.client == "link" and args.endpoint is not None:
         raise ValueError("--client link runs both runtimes here: leave out --endpoint")
@@ -140,6 +154,7 @@ def targets(args: argparse.Namespace) -> list[Target]:
                 namespace=args.namespace, security=security, user=args.user, password=password,
                 unit_id=args.unit_id, word_order=args.word_order, poll_interval_ms=args.poll_interval,
                 publishing_interval_ms=args.publishing_interval, timeout=args.timeout, loop=args.loop,
+                client_cpus=args.client_cpus,
             ))
     return result
 
@@ -195,6 +210,12 @@ def _latency(args: argparse.Namespace) -> int:
             args.out.mkdir(parents=True, exist_ok=True)
         except OSError as error:
             print(f"softplc latency: cannot create --out {args.out}: {error}", file=sys.stderr)
+            return EXIT_FAILURE
+    if args.cpus is not None:
+        try:
+            set_cpu_affinity(args.cpus)
+        except RealtimeError as error:
+            print(f"softplc latency: --cpus: {error}", file=sys.stderr)
             return EXIT_FAILURE
     loop_factory = None
     if args.loop == "uvloop":

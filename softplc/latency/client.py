@@ -26,6 +26,7 @@ from typing import Any, Callable, TextIO
 from softplc.latency.driver import ROLES, Driver, DriverError, ReadyTracker, Snapshot
 from softplc.latency.endpoint import EndpointError, parse_endpoint
 from softplc.util.plurals import plural
+from softplc.util.realtime import RealtimeError, cpu_list, set_cpu_affinity
 
 Emit = Callable[[dict[str, Any]], None]
 MAX_CONSECUTIVE_TIMEOUTS = 3
@@ -186,6 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--password", default=os.environ.get("SOFTPLC_LATENCY_PASSWORD"))
     parser.add_argument("--unit-id", type=int, default=1)
     parser.add_argument("--word-order", choices=("big", "little"), default="big")
+    parser.add_argument("--cpus", type=cpu_list, metavar="LIST", help="keep this client on these CPUs (e.g. 1; Linux)")
     return parser
 
 
@@ -197,6 +199,13 @@ def main(argv: list[str] | None = None, out: TextIO = sys.stdout) -> int:
     def emit(event: dict[str, Any]) -> None:
         out.write(json.dumps(event) + "\n")
         out.flush()
+
+    if args.cpus is not None:
+        try:
+            set_cpu_affinity(args.cpus)
+        except RealtimeError as error:
+            emit({"type": "error", "message": f"--cpus: {error}", "t": time.monotonic()})
+            return 1
 
     async def run() -> None:
         driver = build_driver(args)

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from softplc.latency.results import Measurement, Progress, Sample, interrupted
 from softplc.latency.target import Target
+from softplc.util.realtime import format_cpus
 
 log = logging.getLogger(__name__)
 
@@ -223,6 +224,8 @@ def client_command(target: Target, endpoint: str) -> list[str]:
         argv += ["--duration", f"{target.duration:g}"]
     for tag in target.tags:
         argv += ["--tag", tag]
+    if target.client_cpus is not None:
+        argv += ["--cpus", format_cpus(target.client_cpus)]
     for option, value in (("--namespace", target.namespace), ("--security", target.security), ("--user", target.user)):
         if value:
             argv += [option, value]

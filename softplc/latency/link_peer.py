@@ -30,6 +30,7 @@ import yaml
 
 from softplc.latency.results import Measurement, Progress, Sample, interrupted
 from softplc.latency.target import Target
+from softplc.util.realtime import format_cpus
 
 ANSWER_YAML = Path(__file__).resolve().parents[2] / "programs" / "handshake_answer.yaml"
 OPCUA_SOURCES = {"Ready": "ns={ns};s=Ready", "TaskID": "ns={ns};s=TaskID", "SeenStamp": "ns={ns};s=AnswerSeen"}
@@ -68,8 +69,9 @@ async def run_link_peer(target: Target, result: Measurement, progress: Progress,
     observer = Observer(plant, result)
     config = answer_config(target, result.endpoint, state)
     env = {**os.environ, "PYTHONPATH": str(ANSWER_YAML.parents[1]) + (os.pathsep + os.environ["PYTHONPATH"] if os.environ.get("PYTHONPATH") else "")}
+    placement = ["--cpus", format_cpus(target.client_cpus)] if target.client_cpus is not None else []
     process = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "softplc", "run", str(config), "--state-dir", str(state / "answer-state"), "--no-status",
+        sys.executable, "-m", "softplc", "run", str(config), "--state-dir", str(state / "answer-state"), "--no-status", *placement,
         stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE, env=env,
     )
     result.client_pid = process.pid

@@ -25,6 +25,7 @@ from softplc.latency.endpoint import EndpointError, parse_endpoint
 from softplc.latency.plant import handshake_config
 from softplc.latency.results import Measurement, Progress, Sample, interrupted
 from softplc.latency.target import Target
+from softplc.util.realtime import format_cpus
 
 log = logging.getLogger(__name__)
 
@@ -151,4 +152,7 @@ def conditions(target: Target) -> dict[str, Any]:
         "python": sys.version.split()[0],
         "platform": sys.platform,
         "event_loop": target.loop,
+        # Where the two sides ran: the CPUs this process (our runtime, if any) and the client may use.
+        "runtime_cpus": format_cpus(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else "",
+        "client_cpus": format_cpus(target.client_cpus) if target.client_cpus is not None else "",
     }

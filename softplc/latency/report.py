@@ -285,8 +285,11 @@ def _print_details(run: Measurement, out: TextIO) -> None:
     cpu = ""
     if "cpu_busy_percent" in c:
         cpu = f", CPUs {c['cpu_busy_percent']:g} % busy and {c['cpu_steal_percent']:g} % stolen by the hypervisor during the run"
+    placement = ""
+    if c.get("client_cpus"):
+        placement = f", runtime on CPU {c.get('runtime_cpus')} and client on CPU {c['client_cpus']}"
     print(f"  conditions: {c.get('cpus')} CPUs, load average {c.get('load_average_1_5_15')} at start{cpu}, "
-          f"Python {c.get('python')}, {c.get('event_loop')} loop", file=out)
+          f"Python {c.get('python')}, {c.get('event_loop')} loop{placement}", file=out)
 
 
 def _table(rows: list[list[str]], header: list[str], out: TextIO) -> None:

@@ -29,6 +29,7 @@ class Target:
     publishing_interval_ms: float = 0.0
     timeout: float | None = None  # per Ready; default: the longest task + 1 s
     loop: str = "asyncio"
+    client_cpus: frozenset[int] | None = None  # CPUs the client process is kept on (None: the OS places it)
 
     @property
     def mode(self) -> str:

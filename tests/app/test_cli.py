@@ -6,6 +6,7 @@ import csv
 import io
 import json
 import logging
+import os
 import queue
 import signal
 import subprocess
@@ -332,6 +333,29 @@ def test_rt_priority_runs_or_says_why_not(tmp_path: Path, plant: Path) -> None:
     else:
         assert result.returncode == 0, result.stderr
         assert "stopped: duration of 0.3 s reached" in result.stderr
+
+
+def test_cpus_keeps_the_runtime_there_and_refuses_what_the_machine_lacks(tmp_path: Path, plant: Path) -> None:
+    result = subprocess.run([SOFTPLC, "run", str(plant), "--cpus", "0-999", "--duration", "0.1"],
+                            capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == 1
+    assert result.stderr.startswith("softplc: --cpus: there is no CPU ") and "this machine has CPU 0" in result.stderr
+    result = subprocess.run([SOFTPLC, "run", str(plant), "--cpus", "1-0"], capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == 2
+    assert "argument --cpus: '1-0': a range goes from the lower CPU number to the higher one" in result.stderr
+    last = max(os.sched_getaffinity(0))  # a CPU this test may use, the last (the runtime starts on all of them)
+    process = subprocess.Popen([SOFTPLC, "run", str(plant), "--cpus", str(last), "--duration", "60", "--state-dir", str(tmp_path),
+                                "--no-status", *FREE_PORTS], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        assert process.stderr is not None
+        for line in process.stderr:  # the runtime lists what it serves once it has started
+            if line.startswith("serving:"):
+                break
+        assert process.poll() is None, "softplc run ended early"
+        assert os.sched_getaffinity(process.pid) == {last}
+    finally:
+        process.terminate()
+        process.communicate(timeout=60)
 
 
 def test_a_simulated_run_neither_restores_nor_saves_retained_values(cli, tmp_path: Path) -> None:

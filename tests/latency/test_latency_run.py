@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import io
 import json
 import os
 import signal
@@ -19,6 +20,7 @@ from softplc.latency.measurement import Measurement, Target, measure
 from softplc.latency.plant import handshake_config
 from softplc.latency.progress import summary
 from softplc.latency.report import to_json
+from softplc.util.realtime import format_cpus
 
 SAMPLES = 24
 
@@ -294,3 +296,35 @@ async def test_ctrl_c_at_start_ends_quietly():
     assert process.returncode == 1
     assert b"Traceback" not in rest and b"interrupted by the user" in rest
 
+
+
+async def test_cpus_place_the_runtime_and_the_client_and_the_report_says_where():
+    cpus = sorted(os.sched_getaffinity(0))
+    runtime_cpu, client_cpu = cpus[0], cpus[-1]
+    code, stdout, stderr = await run_cli("latency", "--protocol", "modbus", "--scenario", "fast", "--samples", "6", "--json",
+                                         "--cpus", str(runtime_cpu), "--client-cpus", str(client_cpu))
+    assert code == 0, stderr
+    (run,) = json.loads(stdout)["runs"]
+    check_run(run, "modbus", 6)
+    assert run["conditions"]["runtime_cpus"] == str(runtime_cpu) and run["conditions"]["client_cpus"] == str(client_cpu)
+    assert f"runtime on CPU {runtime_cpu} and client on CPU {client_cpu}" in stderr
+
+
+async def test_cpus_that_cannot_be_had_are_refused_before_the_run():
+    code, stdout, stderr = await run_cli("latency", "--samples", "3", "--client-cpus", "4096")
+    assert code == 1 and stdout == ""
+    machine = format_cpus(frozenset(range(os.cpu_count() or 1)))
+    assert stderr.strip() == f"softplc latency: there is no CPU 4096: this machine has CPU {machine}"
+    code, _, stderr = await run_cli("latency", "--endpoint", "127.0.0.1:1", "--samples", "3", "--cpus", "0")
+    assert code == 1 and "--cpus places our runtime, which --endpoint does not start" in stderr
+    code, _, stderr = await run_cli("latency", "--cpus", "zero")
+    assert code == 2 and "argument --cpus: 'zero' is not a CPU list" in stderr
+
+
+def test_the_client_refuses_a_cpu_it_cannot_be_kept_on(tmp_path):
+    from softplc.latency import client
+
+    out = io.StringIO()
+    assert client.main(["--protocol", "modbus", "--endpoint", "127.0.0.1:1", "--cpus", "4096"], out=out) == 1
+    (event,) = [json.loads(line) for line in out.getvalue().splitlines()]
+    assert event["type"] == "error" and event["message"].startswith("--cpus: there is no CPU 4096")
