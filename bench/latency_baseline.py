@@ -21,7 +21,13 @@ medians too, which a busy machine's stalls shift less), then checks the goals:
               OPC UA hi-res mean <= 1.5 x the floor; the naive setup's mean >= 3 x OPC UA's and
               >= 5 x Modbus's
 
-    .venv/bin/python bench/latency_baseline.py --scenario fast --samples 200 --scan 1 [--out DIR]
+    .venv/bin/python bench/latency_baseline.py --scenario fast --samples 200 --scan 1 [--out DIR] [--no-pin]
+
+Every setup runs with the same placement: the PLC side (our runtime, the naive server, the floor's
+`softplc run`) on the first CPU and every client on the last (`softplc latency --cpus 0
+--client-cpus 1`, as a soft PLC is deployed on a core of its own); `--no-pin` lets the operating
+system place them all, as before 2026-11-27 (on 2 CPUs the client then often waits for the
+runtime's CPU: 2.2 ms pinned, 3.2 ms not, in one sitting).
 
 A goal missed prints GOAL MISSED. Other load on the machine distorts these figures: the load
 average is printed with each run, and the ratios of one run are what to compare between machines.
@@ -54,6 +60,7 @@ from softplc.latency.measurement import (  # noqa: E402
     measure,
 )
 from softplc.latency.report import print_report, to_json, write_csv  # noqa: E402
+from softplc.util.realtime import format_cpus  # noqa: E402
 
 
 def free_port() -> int:
@@ -63,10 +70,11 @@ def free_port() -> int:
         return int(probe.getsockname()[1])
 
 
-async def run_naive(scenario: str, scan: float, samples: int) -> Measurement:
-    """The naive server here, its client in its own process; joined on ReadyStamp."""
+async def run_naive(scenario: str, scan: float, samples: int, client_cpus: frozenset[int] | None = None) -> Measurement:
+    """The naive server here, its client in its own process (on `client_cpus`); joined on ReadyStamp."""
     endpoint = f"opc.tcp://127.0.0.1:{free_port()}/naive/"
-    target = Target("opcua", scenario, scan, client_mode="poll", endpoint=endpoint, samples=samples, poll_interval_ms=10.0)
+    target = Target("opcua", scenario, scan, client_mode="poll", endpoint=endpoint, samples=samples, poll_interval_ms=10.0,
+                    client_cpus=client_cpus)
     result = Measurement(target, label=f"naive {scan * 1000:g}ms", endpoint=endpoint, same_clock=True,
                          driver="plain asyncua Server + Python loop; client polls read_value every 10 ms",
                          conditions=conditions(target))
@@ -78,6 +86,7 @@ async def run_naive(scenario: str, scan: float, samples: int) -> Measurement:
     began = time.monotonic()
     process = await asyncio.create_subprocess_exec(
         sys.executable, str(REPO / "bench" / "latency_naive.py"), "client", endpoint, "--samples", str(samples),
+        *(["--cpus", ",".join(map(str, sorted(client_cpus)))] if client_cpus else []),
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
     result.client_pid = process.pid
     events = []
@@ -206,7 +215,8 @@ async def main_async(args: argparse.Namespace) -> tuple[list[Measurement], Floor
         if protocol == "opcua" and with_floor:
             floors.append(await _floor(args, "before"))
         print(f"softplc {protocol}, {args.scenario}, scan {args.scan:g} ms, {args.samples} samples ...", file=sys.stderr, flush=True)
-        target = Target(protocol, args.scenario, scan, samples=args.samples, loop=args.loop)
+        target = Target(protocol, args.scenario, scan, samples=args.samples, loop=args.loop,
+                        client_cpus=args.placement[1] if args.placement else None)
         runs.append(await measure(target, _progress(protocol, args.samples)))
         if protocol == "opcua" and with_floor:
             floors.append(await _floor(args, "after"))
@@ -214,7 +224,7 @@ async def main_async(args: argparse.Namespace) -> tuple[list[Measurement], Floor
     if not args.no_naive:
         naive_samples = args.naive_samples or args.samples
         print(f"naive asyncua, {args.scenario}, loop every {args.scan:g} ms, {naive_samples} samples ...", file=sys.stderr, flush=True)
-        runs.append(await run_naive(args.scenario, scan, naive_samples))
+        runs.append(await run_naive(args.scenario, scan, naive_samples, args.placement[1] if args.placement else None))
     return runs, floor
 
 
@@ -223,7 +233,7 @@ async def _floor(args: argparse.Namespace, when: str) -> Floor:
     half = max(50, min(args.samples, 200) // 2)
     print(f"floor {when} the OPC UA run: bare asyncua client, scan {args.scan:g} ms, {half} changes and {half} writes ...",
           file=sys.stderr, flush=True)
-    return await floor_at(args.scan, samples=half, writes=half)
+    return await floor_at(args.scan, samples=half, writes=half, placement=args.placement)
 
 
 def _progress(name: str, total: int):  # type: ignore[no-untyped-def]
@@ -238,6 +248,17 @@ def _progress(name: str, total: int):  # type: ignore[no-untyped-def]
     return show
 
 
+def placement(no_pin: bool) -> tuple[frozenset[int], frozenset[int]] | None:
+    """(PLC side CPUs, client CPUs): the first CPU this process may use and the last, as a soft PLC
+    is deployed (a core of its own); None with --no-pin or a single CPU."""
+    if no_pin or not hasattr(os, "sched_getaffinity"):
+        return None
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        return None
+    return frozenset({cpus[0]}), frozenset({cpus[-1]})
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", choices=("slow", "average", "fast"), default="fast")
@@ -248,8 +269,19 @@ def main() -> int:
     parser.add_argument("--naive-samples", type=int, metavar="N", help="samples of the naive baseline (default: --samples)")
     parser.add_argument("--no-floor", action="store_true", help="leave out the floor (bare asyncua delivery + write)")
     parser.add_argument("--loop", choices=("asyncio", "uvloop"), default="asyncio")
+    parser.add_argument("--no-pin", action="store_true",
+                        help="let the operating system place every process (default: the PLC side on the first CPU, "
+                        "every client on the last, for all setups alike)")
     parser.add_argument("--out", type=Path, help="write statistics.json, samples.csv (a label column per run), report.txt here")
     args = parser.parse_args()
+    args.placement = placement(args.no_pin)
+    if args.placement:
+        # This process runs our runtime and the naive server: the PLC side of every setup.
+        os.sched_setaffinity(0, args.placement[0])
+        where = f"the PLC side on CPU {format_cpus(args.placement[0])}, every client on CPU {format_cpus(args.placement[1])}"
+    else:
+        where = "every process where the operating system puts it"
+    print(f"placement: {where}", file=sys.stderr, flush=True)
     load_before = os.getloadavg()
     loop_factory = None
     if args.loop == "uvloop":
@@ -273,7 +305,8 @@ def main() -> int:
         for line in ratio_goals:
             print("  " + line)
     goals += ratio_goals
-    print(f"load average before {tuple(round(x, 2) for x in load_before)}, after {tuple(round(x, 2) for x in os.getloadavg())}")
+    print(f"load average before {tuple(round(x, 2) for x in load_before)}, after {tuple(round(x, 2) for x in os.getloadavg())}; "
+          f"placement: {where}")
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "statistics.json").write_text(json.dumps({"runs": [to_json(r) for r in runs]}, indent=2, default=lambda v: v.to_dict()))

@@ -19,7 +19,10 @@ Wall times include waiting for a CPU (other processes on the machine); CPU times
 compare code between runs on a busy machine. The stamps are taken by wrapping asyncua's and
 softplc's methods in both processes (bench-only instrumentation, a few µs per stamp).
 
-    .venv/bin/python bench/latency_trace.py [--samples 200] [--scan 1] [--scenario fast]
+    .venv/bin/python bench/latency_trace.py [--samples 200] [--scan 1] [--scenario fast] [--pin]
+
+`--pin` places the two sides as bench/latency_baseline.py does by default: our runtime (this
+process) on the first CPU, the client on the last.
 """
 
 from __future__ import annotations
@@ -226,7 +229,11 @@ async def traced_run(args: argparse.Namespace) -> tuple[list[Event], list[Event]
             return [argv[0], str(Path(__file__).resolve()), CLIENT_FLAG, client_file, *argv[3:]]
 
         client_process.client_command = traced_command  # type: ignore[assignment]
-        result = await measure(Target("opcua", args.scenario, args.scan / 1000.0, samples=args.samples))
+        cpus = sorted(os.sched_getaffinity(0))
+        client_cpus = frozenset({cpus[-1]}) if args.pin and len(cpus) > 1 else None
+        if client_cpus:
+            os.sched_setaffinity(0, {cpus[0]})
+        result = await measure(Target("opcua", args.scenario, args.scan / 1000.0, samples=args.samples, client_cpus=client_cpus))
         client = json.loads(Path(client_file).read_text()) if Path(client_file).exists() else []
     return server, client, result.samples, result.conditions
 
@@ -238,6 +245,7 @@ def main() -> int:
     parser.add_argument("--samples", type=int, default=200)
     parser.add_argument("--scan", type=float, default=1.0, metavar="MS")
     parser.add_argument("--scenario", choices=("slow", "average", "fast"), default="fast")
+    parser.add_argument("--pin", action="store_true", help="our runtime on the first CPU, the client on the last")
     args = parser.parse_args()
     load = os.getloadavg()
     server, client, samples, conditions = asyncio.run(traced_run(args))

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import os
 import random
 import statistics
 import sys
@@ -56,6 +57,8 @@ from opcua_common import (  # noqa: E402
     start_server,
     task_latency,
 )
+
+from softplc.util.realtime import format_cpus  # noqa: E402  (opcua_common put the repository on the path)
 
 DELIVERY_GOAL_MS = 5.0
 LATENCY_GOAL_MS = 1.0
@@ -215,13 +218,24 @@ async def measure_floor(endpoint: str, scan_ms: float, samples: int, writes: int
     return Floor(scan_ms, delivery, write, back_to_back)
 
 
-async def floor_at(scan_ms: float, samples: int = 200, writes: int = 500, change_every_ms: float = 100.0) -> Floor:
-    """Serve floor_plant_yaml with `softplc run` in its own process and measure the floor against it."""
+async def floor_at(scan_ms: float, samples: int = 200, writes: int = 500, change_every_ms: float = 100.0,
+                   placement: tuple[frozenset[int], frozenset[int]] | None = None) -> Floor:
+    """Serve floor_plant_yaml with `softplc run` in its own process and measure the floor against it.
+
+    `placement` (server CPUs, client CPUs): `softplc run --cpus` the first, this process (the
+    client) kept on the second while it measures, as latency_baseline.py places every setup.
+    """
     with tempfile.TemporaryDirectory() as tmp:
-        server = start_server(Path(tmp) / "floor", floor_plant_yaml(scan_ms, change_every_ms))
+        extra = ("--cpus", format_cpus(placement[0])) if placement else ()
+        server = start_server(Path(tmp) / "floor", floor_plant_yaml(scan_ms, change_every_ms), *extra)
+        mine = os.sched_getaffinity(0)
         try:
+            if placement:
+                os.sched_setaffinity(0, placement[1])
             return await measure_floor(server.endpoint, scan_ms, samples, writes, change_every_ms)
         finally:
+            if placement:
+                os.sched_setaffinity(0, mine)
             server.stop()
 
 
