@@ -114,15 +114,15 @@ def run_traced_client(argv: list[str], path: str) -> int:
         _stamp(events, "out", type(request).__name__)
         return future
 
-    answer = OpcuaDriver.answer
+    write = OpcuaDriver._write
 
     async def answered(self: Any, task_id: int) -> None:
-        await answer(self, task_id)
+        await write(self, task_id)
         _stamp(events, "acked")
 
     ua_client.UASocketProtocol.data_received = data_received  # type: ignore[method-assign]
     ua_client.UASocketProtocol._send_request = send_request  # type: ignore[method-assign]
-    OpcuaDriver.answer = answered  # type: ignore[method-assign]
+    OpcuaDriver._write = answered  # type: ignore[method-assign]
     atexit.register(lambda: Path(path).write_text(json.dumps(events)))
     return client.main(argv)
 

@@ -63,6 +63,7 @@ class HandshakeClient:
         consecutive = 0
         index = 0
         while index == 0 or not self._finished(started):
+            driver.prepare(next_task)
             try:
                 ready = await driver.wait_ready(self.tracker, self.timeout)
             except TimeoutError as error:
@@ -74,10 +75,13 @@ class HandshakeClient:
                                       f"is the PLC running the handshake? (the last time: {error})") from None
                 continue
             consecutive = 0
-            # The timed part: from seeing Ready to the write's acknowledgement, nothing else.
+            # The timed part: from seeing Ready to the write's acknowledgement, nothing else (an
+            # OPC UA subscription answers where Ready arrives: then the driver timed it).
             t_sent = time.monotonic()
-            await driver.answer(next_task)
+            ahead = await driver.answer(next_task)
             t_done = time.monotonic()
+            if ahead is not None:  # sent where the driver saw Ready, timed there
+                t_sent, t_done = ahead
             self.tracker.answered(ready)
             # Outside the timed part: tells `softplc latency` the client is alive (its watchdog).
             self.emit({"type": "answered", "index": index, "task_id": next_task, "t": t_done})

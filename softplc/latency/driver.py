@@ -86,8 +86,15 @@ class Driver(ABC):
         """All handshake tags in one request where the protocol allows it."""
 
     @abstractmethod
-    async def answer(self, task_id: int) -> None:
-        """Write TaskID and clear Ready (one request where the protocol allows it)."""
+    async def answer(self, task_id: int) -> tuple[float, float] | None:
+        """Write TaskID and clear Ready (one request where the protocol allows it).
+
+        None: the write was made in this call (the caller times it); (sent, done), monotonic s: it
+        was made ahead, where the driver saw Ready (see `prepare`)."""
+
+    def prepare(self, task_id: int) -> None:
+        """The TaskID the next new Ready will be answered with: a driver that sees Ready where it
+        arrives may send the answer at once, and `answer` then returns its times."""
 
     @abstractmethod
     async def wait_ready(self, tracker: ReadyTracker, timeout: float) -> Snapshot:

@@ -74,7 +74,9 @@ class OpcuaDriver(PollingDriver):
         # Subscription mode answers each pushed rise of Ready (Ready is all it monitors).
         self._rises = 0
         self._answered_rises = 0
-        self._write_request: ua.WriteRequest | None = None  # the answer, built once (see answer)
+        self._write_request: ua.WriteRequest | None = None  # the answer, built once (see _write)
+        self._prepared: int | None = None  # the TaskID to answer the next new Ready with, where it arrives
+        self._ahead: asyncio.Future[tuple[int, float, float]] | None = None  # that answer: (TaskID, sent, done)
         self._awaiting_ready = False  # wait_ready is waiting: a rise will be answered at once
         mode = f"subscription, publishing interval {publishing_interval:g} ms" if subscription else f"polling every {poll_interval * 1e3:g} ms"
         secured = security.split(",")[0] if security else "None"
@@ -159,9 +161,25 @@ class OpcuaDriver(PollingDriver):
     def status_changed(self, status: ua.StatusCode) -> None:
         log.warning("subscription status changed: %s", status)
 
+    def prepare(self, task_id: int) -> None:
+        self._prepared = task_id
+
     async def published(self) -> None:
-        """Hold the next Publish request back while a Ready just seen is being answered."""
+        """Answer a Ready just seen here, or hold the next Publish request back until it is answered."""
         if not (self._awaiting_ready and self._rises > self._answered_rises):
+            return
+        task_id, self._prepared = self._prepared, None
+        if task_id is not None:
+            # The answer goes out where Ready arrived, in asyncua's publish loop: no task switch
+            # between seeing Ready and the Write; the next Publish request follows the response.
+            ahead = self._ahead = asyncio.get_running_loop().create_future()
+            sent = time.monotonic()
+            try:
+                await self._write(task_id)
+            except DriverError as error:
+                ahead.set_exception(error)
+            else:
+                ahead.set_result((task_id, sent, time.monotonic()))
             return
         gate = self._answer_gate = asyncio.get_running_loop().create_future()
         try:
@@ -180,6 +198,9 @@ class OpcuaDriver(PollingDriver):
 
     async def close(self) -> None:
         self._open_gate()
+        ahead = self._ahead
+        if ahead is not None and ahead.done() and not ahead.cancelled():
+            ahead.exception()  # an answer ahead that failed as the run ended: reported by the run, if at all
         try:
             await self.client.disconnect()
         except Exception as error:  # the server may be gone already
@@ -192,7 +213,19 @@ class OpcuaDriver(PollingDriver):
             raise DriverError(f"read failed: {error!r}") from None
         return _snapshot(dict(zip(self._roles, values)), time.monotonic())
 
-    async def answer(self, task_id: int) -> None:
+    async def answer(self, task_id: int) -> tuple[float, float] | None:
+        self._prepared = None
+        ahead, self._ahead = self._ahead, None
+        if ahead is not None:
+            answered, sent, done = await ahead  # DriverError if it failed
+            if answered == task_id:
+                return sent, done
+        self._open_gate()
+        await self._write(task_id)
+        return None
+
+    async def _write(self, task_id: int) -> None:
+        """Write TaskID and clear Ready in one request; DriverError if it failed or was refused."""
         # One WriteRequest object, built at the first answer, with the new TaskID put in each time,
         # sent by the connection's protocol as asyncua's session.write sends it (the request's
         # header is set there): building the nodes' WriteValues and going through write_values'
@@ -206,7 +239,6 @@ class OpcuaDriver(PollingDriver):
                                    Value=ua.DataValue(ua.Variant(False, self.types["ready"])))]
             request = self._write_request = ua.WriteRequest(Parameters=ua.WriteParameters(NodesToWrite=items))
         request.Parameters.NodesToWrite[0].Value.Value.Value = task_id
-        self._open_gate()
         protocol = self.client.uaclient.protocol
         if protocol is None:
             raise DriverError("write failed: the connection to the server is closed")

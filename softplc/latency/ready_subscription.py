@@ -6,9 +6,9 @@ answers a notification with a Write, that put on the answer's path: a task switc
 of a Publish request, and on the server the handling of that Publish request ahead of the Write
 (measured at a 1 ms scan: about a third of the time from the notification's arrival to the
 Write on the wire). `ReadySubscription` reads each PublishResult where the publish loop decodes
-it and tells its `Listener` at once; while the listener is about to answer, it holds the next
-Publish request back until the answer has been sent (`Listener.published`), so the server sees
-the Write first. A client may send its Publish requests whenever it likes; the notifications of
+it and tells its `Listener` at once; the listener answers right there, in the publish loop
+(`Listener.published`), or holds the next Publish request back until its answer has been sent,
+so the server sees the Write first. A client may send its Publish requests whenever it likes; the notifications of
 the moment stay queued on the server until the next one arrives.
 """
 
@@ -31,7 +31,8 @@ class Listener(Protocol):
         """The server changed the subscription's status (e.g. it timed out)."""
 
     async def published(self) -> None:
-        """Called after each PublishResult; the next Publish request is sent when this returns."""
+        """Called after each PublishResult; the next Publish request is sent when this returns (an
+        answer may be written meanwhile)."""
 
 
 class ReadySubscription(Subscription):
