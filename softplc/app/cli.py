@@ -267,22 +267,15 @@ def cmd_run(args: argparse.Namespace) -> int:
             print("softplc: --loop uvloop needs the uvloop package: pip install uvloop", file=sys.stderr)
             return EXIT_FAILURE
         loop_factory = uvloop.new_event_loop
-    if args.cpus is not None:
-        from softplc.util.realtime import RealtimeError, set_cpu_affinity
+    from softplc.util.realtime import RealtimeError, set_cpu_affinity, set_realtime_priority
 
-        try:
-            set_cpu_affinity(args.cpus)
-        except RealtimeError as error:
-            print(f"softplc: --cpus: {error}", file=sys.stderr)
-            return EXIT_FAILURE
-    if args.rt_priority is not None:
-        from softplc.util.realtime import RealtimeError, set_realtime_priority
-
-        try:
-            set_realtime_priority(args.rt_priority)
-        except RealtimeError as error:
-            print(f"softplc: --rt-priority: {error}", file=sys.stderr)
-            return EXIT_FAILURE
+    for option, value, apply in (("--cpus", args.cpus, set_cpu_affinity), ("--rt-priority", args.rt_priority, set_realtime_priority)):
+        if value is not None:
+            try:
+                apply(value)
+            except RealtimeError as error:
+                print(f"softplc: {option}: {error}", file=sys.stderr)
+                return EXIT_FAILURE
     clock = SimClock(speed=args.speed) if args.sim else RealClock()
     logs.use_clock(clock)  # log timestamps in simulated time under --sim
     # A simulated run starts from the initial values and leaves the retained ones alone, so
