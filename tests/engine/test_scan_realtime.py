@@ -69,10 +69,11 @@ async def test_an_overrun_skips_and_counts_missed_releases_and_never_bursts(real
     gaps = [b - a for a, b in zip(times, times[1:])]
     assert min(gaps) >= 0.035
     assert sorted(gaps)[len(gaps) // 2] == pytest.approx(0.040, abs=0.004)  # median: the next free release
-    # cycles against time: the starts span (cycles - 1 + skipped releases) intervals
+    # cycles against time: every release between the first start and the last either started a
+    # cycle or was skipped and counted; the skips counted after the last start (its own, and any
+    # while the run stopped under load) lie outside that span, so it is a bound, not a sum.
     elapsed_releases = (times[-1] - times[0]) / 0.010
-    skipped_before_last = overruns - (overruns // cycles)  # the last cycle's skips lie after it
-    assert elapsed_releases == pytest.approx(cycles - 1 + skipped_before_last, abs=4)
+    assert 3.5 * (cycles - 1) <= elapsed_releases <= cycles - 1 + overruns + 1, (elapsed_releases, cycles, overruns)
     for start in times:  # each start is on the 10 ms grid (origin = first start, within latency)
         offset = (start - times[0]) % 0.010
         assert min(offset, 0.010 - offset) < 0.005
