@@ -86,8 +86,9 @@ async def run_naive(scenario: str, scan: float, samples: int, client_cpus: froze
     began = time.monotonic()
     process = await asyncio.create_subprocess_exec(
         sys.executable, str(REPO / "bench" / "latency_naive.py"), "client", endpoint, "--samples", str(samples),
-        *(["--cpus", ",".join(map(str, sorted(client_cpus)))] if client_cpus else []),
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+    if client_cpus:
+        os.sched_setaffinity(process.pid, client_cpus)  # placed from here: the naive client stays as a user writes it
     result.client_pid = process.pid
     events = []
     assert process.stdout is not None

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
-import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -117,11 +116,7 @@ def main() -> int:
     client.add_argument("endpoint")
     client.add_argument("--samples", type=int, default=100)
     client.add_argument("--poll", type=float, default=0.01, help="seconds between reads of Ready (default 0.01)")
-    client.add_argument("--cpus", help="keep the client on these CPUs (comma-separated, e.g. 1), as latency_baseline.py "
-                        "places every client")
     args = parser.parse_args()
-    if args.cpus:
-        os.sched_setaffinity(0, {int(cpu) for cpu in args.cpus.split(",")})
     asyncio.run(naive_client(args.endpoint, args.samples, args.poll))
     return 0
 

@@ -215,6 +215,7 @@ def report(walls: list[list[float]], cpus: list[list[float]], publishes: list[in
 
 
 async def traced_run(args: argparse.Namespace) -> tuple[list[Event], list[Event], list[Any], dict[str, Any]]:
+    from bench.latency_baseline import placement
     from softplc.latency import client_process
     from softplc.latency.measurement import Target, measure
 
@@ -229,11 +230,11 @@ async def traced_run(args: argparse.Namespace) -> tuple[list[Event], list[Event]
             return [argv[0], str(Path(__file__).resolve()), CLIENT_FLAG, client_file, *argv[3:]]
 
         client_process.client_command = traced_command  # type: ignore[assignment]
-        cpus = sorted(os.sched_getaffinity(0))
-        client_cpus = frozenset({cpus[-1]}) if args.pin and len(cpus) > 1 else None
-        if client_cpus:
-            os.sched_setaffinity(0, {cpus[0]})
-        result = await measure(Target("opcua", args.scenario, args.scan / 1000.0, samples=args.samples, client_cpus=client_cpus))
+        places = placement(not args.pin)
+        if places:
+            os.sched_setaffinity(0, places[0])
+        result = await measure(Target("opcua", args.scenario, args.scan / 1000.0, samples=args.samples,
+                                      client_cpus=places[1] if places else None))
         client = json.loads(Path(client_file).read_text()) if Path(client_file).exists() else []
     return server, client, result.samples, result.conditions
 
