@@ -26,7 +26,7 @@ from typing import Any, Callable, TextIO
 from softplc.latency.driver import ROLES, Driver, DriverError, ReadyTracker, Snapshot
 from softplc.latency.endpoint import EndpointError, parse_endpoint
 from softplc.util.plurals import plural
-from softplc.util.realtime import RealtimeError, cpu_list, set_cpu_affinity
+from softplc.util.realtime import RealtimeError, cpu_list, format_cpus, set_cpu_affinity
 
 Emit = Callable[[dict[str, Any]], None]
 MAX_CONSECUTIVE_TIMEOUTS = 3
@@ -56,7 +56,8 @@ class HandshakeClient:
         driver = self.driver
         first = await driver.read()
         next_task = first.task_id % 3 + 1 if first.task_id in (1, 2, 3) else 1
-        self.emit({"type": "hello", "pid": os.getpid(), "driver": driver.description, "serves": sorted(driver.serves),
+        cpus = format_cpus(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else ""
+        self.emit({"type": "hello", "pid": os.getpid(), "cpus": cpus, "driver": driver.description, "serves": sorted(driver.serves),
                    "task_id": first.task_id, "handshakes": first.handshakes, "t": time.monotonic()})
         before = first.handshakes  # the PLC's count before the next answer
         started = time.monotonic()

@@ -79,6 +79,8 @@ async def run_client(target: Target, result: Measurement, progress: Progress, st
                 result.connected = True
                 result.driver = event.get("driver", "")
                 last_handshakes = event.get("handshakes")
+                if target.client_cpus is not None and event.get("cpus"):
+                    result.conditions["client_cpus"] = event["cpus"]  # where the client says it runs
             elif kind in ("sample", "warmup"):
                 sample = Sample.from_event(event)
                 (result.samples if kind == "sample" else result.warmup).append(sample)

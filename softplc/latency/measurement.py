@@ -152,7 +152,8 @@ def conditions(target: Target) -> dict[str, Any]:
         "python": sys.version.split()[0],
         "platform": sys.platform,
         "event_loop": target.loop,
-        # Where the two sides ran: the CPUs this process (our runtime, if any) and the client may use.
+        # Where the two sides ran: the CPUs this process (our runtime, if any) and the client may use
+        # (asked for here; replaced by what the client reports when it says hello).
         "runtime_cpus": format_cpus(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else "",
         "client_cpus": format_cpus(target.client_cpus) if target.client_cpus is not None else "",
     }
