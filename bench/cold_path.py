@@ -13,6 +13,10 @@ If the two gapped figures are both well above the back-to-back one, what slows a
 the CPU caches (shared with other processes and, in a VM, other machines), not the process being
 woken: a scheduling or loop change cannot win it back, only less work on the path can.
 
+Beside each asyncua path, softplc's short way for the same message: the latency client's decoding
+(`softplc/latency/response_decoding.py`) and the server's encoding of a PublishResponse whose value
+is a tag change encoded for the first time (`softplc/adapters/opcua/response_encoding.py`).
+
     .venv/bin/python bench/cold_path.py [--gap 100] [--count 60]
 """
 
@@ -26,13 +30,26 @@ from collections.abc import Callable
 from asyncua import ua
 from asyncua.ua.ua_binary import struct_from_binary, struct_to_binary
 
+from softplc.adapters.opcua.response_encoding import encode_response
+from softplc.core.tags import Quality
+from softplc.latency.response_decoding import decode_publish_response
+from softplc.protocols.opcua_variants import tag_data_value
 
-def publish_response() -> bytes:
-    value = ua.DataValue(ua.Variant(True, ua.VariantType.Boolean))
+
+def publish_response(value: ua.DataValue | None = None) -> ua.PublishResponse:
+    """A PublishResponse of one Boolean, as the server sends Ready's change."""
+    if value is None:
+        value = tag_data_value(True, ua.VariantType.Boolean, Quality.GOOD, 1_795_000_000.0)
     message = ua.NotificationMessage(SequenceNumber=5, NotificationData=[
         ua.DataChangeNotification(MonitoredItems=[ua.MonitoredItemNotification(ClientHandle=201, Value=value)])])
     result = ua.PublishResult(SubscriptionId=1, AvailableSequenceNumbers=[5], NotificationMessage=message, Results=[ua.StatusCode()])
-    return struct_to_binary(ua.PublishResponse(Parameters=result))
+    return ua.PublishResponse(Parameters=result)
+
+
+def fresh_changes(count: int) -> Callable[[], ua.PublishResponse]:
+    """Each call: the next of `count` PublishResponses, each with a tag change not encoded yet."""
+    responses = iter([publish_response() for _ in range(count)])
+    return lambda: next(responses)
 
 
 def write_request() -> ua.WriteRequest:
@@ -70,11 +87,16 @@ def main() -> None:
     if args.gap <= 0 or args.count < 1:
         parser.error("--gap must be > 0 and --count >= 1")
     gap = args.gap / 1000
-    encoded = publish_response()
+    response = publish_response()
+    encoded = struct_to_binary(response)
     request = write_request()
+    changes = fresh_changes(2 * args.count + 2002)
     paths = {"decode a PublishResponse": lambda: struct_from_binary(ua.PublishResponse, ua.utils.Buffer(encoded)),
+             "  softplc's latency client": lambda: decode_publish_response(ua.utils.Buffer(encoded)),
+             "encode a PublishResponse": lambda: struct_to_binary(response),
+             "  softplc's server": lambda: encode_response(changes()),
              "encode a WriteRequest": lambda: struct_to_binary(request)}
-    print(f"asyncua, microseconds per run (median / mean); gapped runs {args.gap:g} ms apart, {args.count} each")
+    print(f"microseconds per run (median / mean); gapped runs {args.gap:g} ms apart, {args.count} each")
     print(f"{'path':26s} {'back to back':>16s} {'after a sleep':>16s} {'after a spin':>16s}  cold ÷ warm")
     for name, work in paths.items():
         warm = timed(work, 2000, None, 0.0)

@@ -54,7 +54,6 @@ def trace_server(events: list[Event]) -> None:
     """Stamp what the server receives and sends, and when the publisher starts a push."""
     from asyncua import ua
     from asyncua.server.address_space import AddressSpace
-    from asyncua.server.uaprocessor import UaProcessor
 
     from softplc.adapters.opcua import processor, transport
 
@@ -64,7 +63,7 @@ def trace_server(events: list[Event]) -> None:
         _stamp(events, "in")
         received(self, data)
 
-    sent = UaProcessor.send_response
+    sent = processor.GuardedProcessor.send_response
 
     def send_response(self: Any, handle: Any, seqhdr: Any, response: Any, *args: Any) -> None:
         sent(self, handle, seqhdr, response, *args)
@@ -87,7 +86,7 @@ def trace_server(events: list[Event]) -> None:
         return await serve(self, typeid, *args)
 
     transport.GuardedProtocol.data_received = data_received  # type: ignore[method-assign]
-    UaProcessor.send_response = send_response  # type: ignore[method-assign]
+    processor.GuardedProcessor.send_response = send_response  # type: ignore[method-assign]
     AddressSpace.write_attribute_value = write_attribute_value  # type: ignore[method-assign]
     processor.GuardedProcessor._process_message = process_message  # type: ignore[method-assign]
 

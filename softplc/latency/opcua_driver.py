@@ -12,17 +12,18 @@ wire before the next Publish request.
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import time
 from typing import Any
 
 from asyncua import Client, Node, ua
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
-from asyncua.ua.ua_binary import struct_from_binary
 
 from softplc.latency.certificate import MODES, Security, application_uri
 from softplc.latency.driver import REQUIRED_ROLES, TAG_NAMES, DriverError, PollingDriver, ReadyTracker, Snapshot
-from softplc.latency.ready_subscription import ReadySubscription
+from softplc.latency.ready_subscription import ReadySubscription, publish_decoded
+from softplc.latency.response_decoding import decode_write_response
 
 log = logging.getLogger(__name__)
 
@@ -135,8 +136,11 @@ class OpcuaDriver(PollingDriver):
         params.MaxNotificationsPerPublish = 0
         params.PublishingEnabled = True
         params.Priority = 0
-        # As Client.create_subscription, with the subscription class that reads PublishResults inline.
-        self._sub = ReadySubscription(self.client.uaclient.session, params, self)
+        # As Client.create_subscription, with the subscription class that reads PublishResults inline,
+        # and the session's publish decoding them the short way.
+        session = self.client.uaclient.session
+        session.publish = functools.partial(publish_decoded, session)
+        self._sub = ReadySubscription(session, params, self)
         await self._sub.init()
         # Only Ready is monitored. Every other monitored tag that changes with it would be queued
         # and published when our next Publish request arrives, which the server handles just
@@ -244,7 +248,7 @@ class OpcuaDriver(PollingDriver):
             raise DriverError("write failed: the connection to the server is closed")
         try:
             data = await protocol.send_request(request)
-            response = struct_from_binary(ua.WriteResponse, data)
+            response = decode_write_response(data)
             response.ResponseHeader.ServiceResult.check()
             results = response.Results
         except Exception as error:

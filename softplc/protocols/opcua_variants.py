@@ -65,10 +65,12 @@ class TagDataValue(ua.DataValue):
     """A DataValue made for one push and never changed afterwards, so copying it is pointless.
 
     asyncua deep-copies every DataValue it hands to a monitored item (~40 µs, most of the cost
-    of a subscribed change); for these the "copy" is the object itself.
+    of a subscribed change); for these the "copy" is the object itself. Its binary encoding is
+    made once, when first sent, and kept in `binary` (adapters/opcua/response_encoding.py).
     """
 
-    __slots__ = ()
+    __slots__ = ("binary",)
+    binary: bytes  # unset until first encoded
 
     def __copy__(self) -> TagDataValue:
         return self

@@ -20,6 +20,9 @@
 - Read and Write, the services clients call most, are served here first: asyncua finds a
   service by comparing the request's type with a freshly built NodeId per service in turn (17 for
   a Write, ~15 µs of a Write's ~100 µs here); the service itself is asyncua's.
+- Publish, Write and Read responses are encoded by `response_encoding.encode_response` (a tag
+  change's value encoded once for every subscriber and Read; asyncua's generic encoder, which
+  runs cold on a sparse path, for the rest: protocols/opcua_binary.py).
 - A session whose connection is lost keeps its subscriptions until it times out (asyncua, Part
   4: the client may come back with ActivateSession on a new connection); they go dormant at
   once, so a vanished client costs no work per tag change meanwhile (subscriptions.py). A
@@ -41,6 +44,7 @@ from asyncua.ua.ua_binary import struct_from_binary
 from cryptography import x509
 
 from softplc.adapters.opcua.browsing import ContinuationPoints
+from softplc.adapters.opcua.response_encoding import encode_response
 from softplc.adapters.opcua.roles import SessionUser
 from softplc.adapters.opcua.subscriptions import GuardedSubscriptionService
 from softplc.util.peers import peer_host
@@ -94,6 +98,14 @@ class GuardedProcessor(UaProcessor):
 
     _continuation_points: ContinuationPoints | None = None
     _continuation_session: Any = None
+
+    def send_response(self, requesthandle: int, seqhdr: Any, response: Any,
+                      msgtype: ua.MessageType = ua.MessageType.SecureMessage) -> None:
+        # As UaProcessor.send_response (asyncua 2.1.0), with our encoder.
+        response.ResponseHeader.RequestHandle = requesthandle
+        data = self._connection.message_to_binary(encode_response(response), message_type=msgtype,
+                                                  request_id=seqhdr.RequestId)
+        self._transport.write(data)
 
     def open_secure_channel(self, algohdr: Any, seqhdr: Any, body: Any) -> None:
         try:
