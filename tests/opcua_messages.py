@@ -101,3 +101,9 @@ def write_response(rng: random.Random, unusual: bool) -> ua.WriteResponse:
 def read_response(rng: random.Random, unusual: bool) -> ua.ReadResponse:
     pool = tag_values(rng)
     return ua.ReadResponse(ResponseHeader=header(rng, unusual), Results=rng.choice([None, rng.sample(pool, rng.randint(0, 6))]))
+
+
+def generated(make: Any, seed: str, unusual: bool, count: int = 200) -> list[Any]:
+    """`count` messages from `make` (one of the makers above), the same for the same seed."""
+    rng = random.Random(seed)
+    return [make(rng, unusual) for _ in range(count)]

@@ -14,7 +14,7 @@ from asyncua.ua.ua_binary import struct_from_binary, struct_to_binary
 
 from softplc.latency import response_decoding
 from softplc.latency.response_decoding import decode_publish_response, decode_write_response
-from tests.opcua_messages import publish_response, write_response
+from tests.opcua_messages import generated, publish_response, write_response
 
 DECODERS: dict[type, Any] = {ua.PublishResponse: decode_publish_response, ua.WriteResponse: decode_write_response}
 
@@ -37,9 +37,7 @@ def ours(kind: type, encoded: bytes) -> Any:
 @pytest.mark.parametrize("make", [publish_response, write_response], ids=lambda make: make.__name__)
 @pytest.mark.parametrize("unusual", [False, True], ids=["common", "unusual"])
 def test_the_objects_are_asyncuas(make: Any, unusual: bool) -> None:
-    rng = random.Random(f"decode-{make.__name__}-{unusual}")
-    for _ in range(200):
-        response = make(rng, unusual)
+    for response in generated(make, f"decode-{make.__name__}-{unusual}", unusual):
         encoded = struct_to_binary(response)
         kind = type(response)
         assert ours(kind, encoded) == asyncuas(kind, encoded) == struct_from_binary(kind, Buffer(encoded))

@@ -17,15 +17,13 @@ from softplc.adapters.opcua import response_encoding
 from softplc.adapters.opcua.response_encoding import data_value_binary, encode_response
 from softplc.core.tags import Quality
 from softplc.protocols.opcua_variants import VARIANT_TYPES, TagDataValue, tag_data_value
-from tests.opcua_messages import publish_response, read_response, tag_values, write_response
+from tests.opcua_messages import generated, publish_response, read_response, tag_values, write_response
 
 
 @pytest.mark.parametrize("make", [publish_response, write_response, read_response], ids=lambda make: make.__name__)
 @pytest.mark.parametrize("unusual", [False, True], ids=["common", "unusual"])
 def test_the_bytes_are_asyncuas(make: Any, unusual: bool) -> None:
-    rng = random.Random(f"{make.__name__}-{unusual}")
-    for _ in range(200):
-        response = make(rng, unusual)
+    for response in generated(make, f"{make.__name__}-{unusual}", unusual):
         encoded = encode_response(response)
         assert encoded == struct_to_binary(response)
         assert encode_response(response) == encoded  # again, with the tags' values kept encoded
