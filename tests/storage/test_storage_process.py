@@ -112,8 +112,9 @@ def test_rows_a_dying_child_held_are_counted_as_dropped(tmp_path, caplog) -> Non
         held = process._process
         assert held is not None
         os.kill(held.pid, signal.SIGKILL)
-        wait_for(lambda: process.stats.dropped == 10)
-        assert any("holding 10 rows, which are lost" in record.getMessage() for record in caplog.records)
+        # The count is updated under the writer's lock, the error line logged just after it.
+        wait_for(lambda: process.stats.dropped == 10
+                 and any("holding 10 rows, which are lost" in record.getMessage() for record in caplog.records))
         process.put(SINK_NAME, rows(10, 3))
         assert process.flush(timeout=30)  # to the child that replaced it
         assert stored(process.database) == [10.0, 11.0, 12.0] and process.stats.pending == 0
