@@ -69,11 +69,18 @@ _NAP = 0.0001
 class RealClock(Clock):
     """Monotonic real time.
 
-    `spin` is how long before a deadline `sleep_until` stops sleeping in the event loop and
-    spins (yielding to the loop) instead: event-loop timers fire late (asyncio's ~1-2 ms on a typical
-    Linux VM: epoll's millisecond resolution and more; uvloop's ~0.3 ms early), which would
-    dominate a 10 ms task's start latency. The margin adapts: it follows the recent worst
-    lateness of the loop's timers plus 0.5 ms, between 0.5 ms and `max_spin`.
+    The scan engine's sleep (`sleep_until_release`) is precise: `spin` is how long before a
+    release it stops sleeping in the event loop and spins (yielding to the loop) instead:
+    event-loop timers fire late (asyncio's ~1-2 ms on a typical Linux VM: epoll's millisecond
+    resolution and more; uvloop's ~0.3 ms early), which would dominate a 10 ms task's start
+    latency. The margin adapts: it follows the recent worst lateness of the loop's timers plus
+    0.5 ms, between 0.5 ms and `max_spin`.
+
+    Every other sleeper (`sleep`, `sleep_until`: robots' control cycles, link polls, heartbeats)
+    wakes on the loop's timer, up to a couple of milliseconds after its deadline and never before
+    it, without spinning: the spin before each robot group's wake-up (ten a cycle) and each other
+    timer cost the default plant a fifth of its CPU (10 robots: 17 % of a core → 6 %;
+    docs/benchmarks.md), for a precision nothing but a scan release needs.
 
     Scan cycles come first: any other sleeper that wakes less than `guard` (5 ms) before the scan
     engine's next release (or after it, while that cycle has not run yet) waits until the cycle
@@ -103,7 +110,10 @@ class RealClock(Clock):
         return time.monotonic()
 
     async def sleep_until(self, deadline: float) -> None:
-        await self._sleep_until(deadline)
+        remaining = deadline - self.now()
+        await asyncio.sleep(max(remaining, 0.0))  # a zero sleep still gives the loop a turn
+        while self.now() < deadline:  # a timer may fire a clock tick early
+            await asyncio.sleep(0)
         release = self._release
         if release is not None and self.now() >= release - self.guard:
             await self._cycle_done().wait()  # a scan cycle is about to start: let it go first

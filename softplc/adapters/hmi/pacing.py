@@ -88,10 +88,10 @@ class Pacer:
     async def sleep(self, seconds: float) -> None:
         """Wait `seconds` of real time on a loop timer, then let a scan cycle due within the margin go first.
 
-        Not the clock's precise sleep: that spins the last 0.5-4 ms before its deadline (what a
-        scan release needs), and the rate limit's waits of a few ms between frames were then
-        mostly spinning: ~4 % of a core for two groups at 100 frames a second
-        (bench/hmi_live.py, py-spy). A timer a millisecond late costs a frame a millisecond.
+        Real time also under `--sim`, where the clock's sleep is simulated. (The clock's sleep once
+        spun its last 0.5-4 ms; the rate limit's waits of a few ms between frames were then mostly
+        spinning, ~4 % of a core for two groups at 100 frames a second: bench/hmi_live.py, py-spy.)
+        A timer a millisecond late costs a frame a millisecond.
         """
         await asyncio.sleep(seconds)
         if not self.clock.simulated:
