@@ -25,7 +25,9 @@ from asyncua.common.utils import Buffer
 from asyncua.ua.ua_binary import nodeid_to_binary, struct_from_binary
 
 from softplc.protocols.opcua_binary import (
+    DATA_CHANGE_TYPE,
     INT32,
+    MESSAGE_HEAD,
     NULL_EXTENSION,
     UINT32,
     Unusual,
@@ -41,9 +43,7 @@ _PUBLISH_TYPE_ID = ua.NodeId(ua.ObjectIds.PublishResponse_Encoding_DefaultBinary
 _WRITE_TYPE_ID = ua.NodeId(ua.ObjectIds.WriteResponse_Encoding_DefaultBinary, 0, ua.NodeIdType.FourByte)
 _PUBLISH_TYPE = nodeid_to_binary(_PUBLISH_TYPE_ID)
 _WRITE_TYPE = nodeid_to_binary(_WRITE_TYPE_ID)
-_DATA_CHANGE_TYPE = nodeid_to_binary(ua.NodeId(ua.ObjectIds.DataChangeNotification_Encoding_DefaultBinary)) + b"\x01"
 _HEADER = struct.Struct("<qIIBi")  # Timestamp, RequestHandle, ServiceResult, diagnostics mask, StringTable length
-_MESSAGE_HEAD = struct.Struct("<?Iqi")  # MoreNotifications, SequenceNumber, PublishTime, NotificationData length
 _FAILED = (Unusual, struct.error, IndexError)
 
 
@@ -75,15 +75,16 @@ def _publish_response(raw: bytes) -> ua.PublishResponse:
     header, pos = _response_header(raw, len(_PUBLISH_TYPE))
     subscription = UINT32.unpack_from(raw, pos)[0]
     available, pos = read_counters(raw, pos + 4)
-    more, sequence, published, count = _MESSAGE_HEAD.unpack_from(raw, pos)
-    pos += _MESSAGE_HEAD.size
+    more, sequence, published, count = MESSAGE_HEAD.unpack_from(raw, pos)
+    pos += MESSAGE_HEAD.size
     check_length(count)
     notifications: list[Any] | None = None if count < 0 else []
     for _ in range(count):
-        if raw[pos:pos + len(_DATA_CHANGE_TYPE)] != _DATA_CHANGE_TYPE:
+        if not raw.startswith(DATA_CHANGE_TYPE, pos):
             raise Unusual  # events, status changes
-        end = pos + len(_DATA_CHANGE_TYPE) + 4 + INT32.unpack_from(raw, pos + len(_DATA_CHANGE_TYPE))[0]
-        notification, pos = _data_change(raw, pos + len(_DATA_CHANGE_TYPE) + 4)
+        pos += len(DATA_CHANGE_TYPE)
+        end = pos + 4 + INT32.unpack_from(raw, pos)[0]  # the body's length, then the body
+        notification, pos = _data_change(raw, pos + 4)
         if pos != end:
             raise Unusual
         notifications.append(notification)  # type: ignore[union-attr]

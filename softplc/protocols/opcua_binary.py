@@ -18,6 +18,7 @@ import struct
 from typing import Any
 
 from asyncua import ua
+from asyncua.ua.ua_binary import nodeid_to_binary
 
 INT32 = struct.Struct("<i")
 UINT32 = struct.Struct("<I")
@@ -26,6 +27,11 @@ NULL_EXTENSION = b"\x00\x00\x00"  # a null NodeId, no body
 NULL_LIST = INT32.pack(-1)
 EMPTY_LIST = INT32.pack(0)
 MAX_COUNT = 1 << 20  # an array length beyond any real message: left to asyncua
+# A PublishResult's NotificationMessage after its SubscriptionId and AvailableSequenceNumbers:
+# MoreNotifications, SequenceNumber, PublishTime, the NotificationData array's length.
+MESSAGE_HEAD = struct.Struct("<?Iqi")
+# A DataChangeNotification as an ExtensionObject: its binary encoding's TypeId and the "body follows" byte.
+DATA_CHANGE_TYPE = nodeid_to_binary(ua.NodeId(ua.ObjectIds.DataChangeNotification_Encoding_DefaultBinary)) + b"\x01"
 
 # The fixed-size scalar types: VariantType → struct format.
 SCALAR_FORMATS: dict[ua.VariantType, str] = {

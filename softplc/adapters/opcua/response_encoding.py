@@ -24,7 +24,16 @@ from typing import Any
 from asyncua import ua
 from asyncua.ua.ua_binary import create_dataclass_serializer, get_string_encoding, nodeid_to_binary, struct_to_binary
 
-from softplc.protocols.opcua_binary import EMPTY_LIST, INT32, NULL_LIST, SCALAR_FORMATS, UINT32, Unusual
+from softplc.protocols.opcua_binary import (
+    DATA_CHANGE_TYPE,
+    EMPTY_LIST,
+    INT32,
+    MESSAGE_HEAD,
+    NULL_LIST,
+    SCALAR_FORMATS,
+    UINT32,
+    Unusual,
+)
 from softplc.protocols.opcua_variants import TagDataValue
 
 _HEADER = struct.Struct("<qII")  # Timestamp, RequestHandle, ServiceResult
@@ -32,8 +41,6 @@ _HEADER = struct.Struct("<qII")  # Timestamp, RequestHandle, ServiceResult
 _HEADER_TAIL_EMPTY = b"\x00" + struct.pack("<i", 0) + b"\x00\x00\x00"
 _HEADER_TAIL_NULL_TABLE = b"\x00" + struct.pack("<i", -1) + b"\x00\x00\x00"
 _RESULT_HEAD = struct.Struct("<I")  # SubscriptionId
-_MESSAGE_HEAD = struct.Struct("<?Iqi")  # MoreNotifications, SequenceNumber, PublishTime, NotificationData count
-_DATA_CHANGE_TYPE = nodeid_to_binary(ua.NodeId(ua.ObjectIds.DataChangeNotification_Encoding_DefaultBinary)) + b"\x01"
 _TYPE_IDS: dict[type, bytes] = {
     kind: nodeid_to_binary(kind().TypeId) for kind in (ua.PublishResponse, ua.WriteResponse, ua.ReadResponse)
 }
@@ -114,7 +121,7 @@ def _publish_result(result: ua.PublishResult) -> bytes:
     message = result.NotificationMessage
     notifications = message.NotificationData
     parts = [_RESULT_HEAD.pack(result.SubscriptionId), _counters(result.AvailableSequenceNumbers),
-             _MESSAGE_HEAD.pack(result.MoreNotifications, message.SequenceNumber,
+             MESSAGE_HEAD.pack(result.MoreNotifications, message.SequenceNumber,
                                 ua.datetime_to_win_epoch(message.PublishTime), len(notifications))]
     for notification in notifications:
         if type(notification) is not ua.DataChangeNotification:
@@ -123,7 +130,7 @@ def _publish_result(result: ua.PublishResult) -> bytes:
         body = b"".join([INT32.pack(len(items)),
                          *[UINT32.pack(item.ClientHandle) + data_value_binary(item.Value) for item in items],
                          _no_diagnostics(notification.DiagnosticInfos)])
-        parts.append(_DATA_CHANGE_TYPE + INT32.pack(len(body)) + body)
+        parts.append(DATA_CHANGE_TYPE + INT32.pack(len(body)) + body)
     parts.append(_status_codes(result.Results))
     parts.append(_no_diagnostics(result.DiagnosticInfos))
     return b"".join(parts)
