@@ -76,8 +76,8 @@ async def test_a_prometheus_server_scrapes_the_plant(tmp_path: Path) -> None:
                 await asyncio.sleep(0.25)
                 try:
                     targets = (await ask(http, api + "targets"))["activeTargets"]
-                except aiohttp.ClientConnectionError:
-                    continue  # not listening yet
+                except (aiohttp.ClientConnectionError, aiohttp.ContentTypeError):
+                    continue  # not listening yet, or listening but not ready (503, plain text)
                 target = targets[0] if targets else {}
             assert target["scrapeUrl"] == f"http://127.0.0.1:{plant.hmi.port}/metrics" and target["lastError"] == ""
             result = (await ask(http, api + "query", query="softplc_tags"))["result"]
