@@ -76,7 +76,6 @@ class Link(ABC):
         self.writes = {"ok": 0, "refused": 0, "failed": 0}
         self.first_attempt = asyncio.Event()
         self._pending: dict[str, Any] = {}  # tag → the latest local value to send
-        self._sending: dict[str, Any] = {}  # tag → the value a write now on its way carries
         self.client_writes: dict[str, tuple[Any, Origin]] = {}  # tag → (value, origin) of a client's write not sent yet
         self._expect: dict[str, tuple[Any, float]] = {}  # both-tag → (value sent, until when a different remote value is stale)
         self._held: dict[str, Any] = {}  # both-tag → the remote's value received while expecting our write's echo
@@ -285,19 +284,10 @@ class Link(ABC):
             bound = self.bound.get(tag.name)
             if bound is None or not bound.binding.direction.writes:
                 continue
-            if tag.name not in self._pending and (tag.value == bound.value or self._on_its_way(tag.name, tag.value)):
-                # What the remote holds already (for a `both` tag: its own value, just received; no
-                # echo), or what a write is carrying to it: a change of the tag's quality alone (the
-                # link late for a moment) must not send the same value again — it could land after
-                # the remote's own change of a `both` tag and overwrite it.
-                continue
+            if tag.value == bound.value and tag.name not in self._pending:
+                continue  # what the remote holds already (for a `both` tag: its own value, just received; no echo)
             self._pending[tag.name] = tag.value
         self._schedule_flush()
-
-    def _on_its_way(self, name: str, value: Any) -> bool:
-        """`value` is being written to the remote, or was written and its echo is awaited (`both` tags)."""
-        expected = self._expect.get(name)
-        return (name in self._sending and self._sending[name] == value) or (expected is not None and expected[0] == value)
 
     def _schedule_flush(self) -> None:
         if self._pending and self.connected and (self._flushing is None or self._flushing.done()):
@@ -317,7 +307,6 @@ class Link(ABC):
             failed = False
             if items:
                 self._expecting(items)
-                self._sending = dict(batch)
                 try:
                     answers = await self.write(items)
                 except LinkError as error:
@@ -328,8 +317,6 @@ class Link(ABC):
                     failed = True
                 else:
                     self.took(items, answers)
-                finally:
-                    self._sending = {}
             for name, value, origin in clients:
                 if not await self._send_for(origin, name, value):
                     failed = True
