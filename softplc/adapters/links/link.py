@@ -38,6 +38,7 @@ UNCERTAIN_AFTER = 2  # periods without data
 BAD_AFTER = 5
 MIN_QUALITY_PERIOD = 0.01
 LATE_LOG_INTERVAL = 60.0  # s: a link that keeps going late is logged once a minute, not at each episode
+_UNSEEN = object()  # a tag not reported to the link yet
 
 
 class LinkError(Exception):
@@ -76,6 +77,7 @@ class Link(ABC):
         self.writes = {"ok": 0, "refused": 0, "failed": 0}
         self.first_attempt = asyncio.Event()
         self._pending: dict[str, Any] = {}  # tag → the latest local value to send
+        self._local: dict[str, Any] = {}  # tag → its local value when last reported (a report may be of its quality alone)
         self.client_writes: dict[str, tuple[Any, Origin]] = {}  # tag → (value, origin) of a client's write not sent yet
         self._expect: dict[str, tuple[Any, float]] = {}  # both-tag → (value sent, until when a different remote value is stale)
         self._held: dict[str, Any] = {}  # both-tag → the remote's value received while expecting our write's echo
@@ -278,14 +280,23 @@ class Link(ABC):
 
         Only while this plant is active: a standby's image is the active's, mirrored, and the active
         writes it out (docs/redundancy.md)."""
-        if not self.plant.role.is_active():
-            return
+        active = self.plant.role.is_active()
         for tag in tags:
             bound = self.bound.get(tag.name)
             if bound is None or not bound.binding.direction.writes:
                 continue
-            if tag.value == bound.value and tag.name not in self._pending:
-                continue  # what the remote holds already (for a `both` tag: its own value, just received; no echo)
+            before = self._local.get(tag.name, _UNSEEN)
+            self._local[tag.name] = tag.value
+            if not active:
+                continue
+            if tag.name not in self._pending:
+                if tag.value == bound.value:
+                    continue  # what the remote holds already (for a `both` tag: its own value, just received; no echo)
+                if tag.value == before and type(tag.value) is type(before):
+                    # Only the tag's quality changed (the link late for a moment): its value was sent
+                    # already, or is on its way, or was refused. Sent again, it could land after the
+                    # remote's own change of a `both` tag and overwrite it.
+                    continue
             self._pending[tag.name] = tag.value
         self._schedule_flush()
 

@@ -273,3 +273,26 @@ async def test_a_late_link_changes_a_both_tags_quality_never_its_local_value(tmp
     finally:
         remote.hold.set()
         await runtime.stop()
+
+
+async def test_a_late_link_sends_a_value_on_its_way_once(tmp_path: Path, remote: PymodbusRemote) -> None:
+    # A both tag's write is on its way when the link goes late: the tag's quality changes, its value
+    # does not — the same value must not be sent again (a second write, landing after the remote's
+    # own change of the tag, would overwrite it).
+    remote.holding[22] = 5
+    runtime = await linked(tmp_path, remote, period="100ms")
+    db = runtime.db
+    link = links_of(runtime).links["press"]
+    try:
+        await wait_until(lambda: db.value("mode") == 5 and db["mode"].quality is Quality.GOOD)
+        remote.hold.clear()  # answers wait: the write below, and the polls
+        db.submit([("mode", 6)], "program")
+        await wait_until(lambda: db["mode"].quality is Quality.UNCERTAIN, timeout=2, what="UNCERTAIN")
+        remote.hold.set()  # within the link's 1 s timeout: everything is answered, late
+        await wait_until(lambda: remote.holding[22] == 6 and db["mode"].quality is Quality.GOOD, what="the write, and GOOD again")
+        await wait_until(lambda: link._flushing is not None and link._flushing.done() and not link._pending, what="the writes done")
+        writes = [entry for entry in remote.request_log if entry[0] in (6, 16) and entry[1] <= 22 < entry[1] + entry[2]]
+        assert len(writes) == 1, writes
+    finally:
+        remote.hold.set()
+        await runtime.stop()
