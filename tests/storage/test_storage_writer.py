@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +64,31 @@ def test_rows_are_committed_in_batches_by_one_thread(storage_settings: StorageSe
     assert writer.stats.transactions < 1000  # batched, not one commit per row
     assert sink.threads == {"test-writer"}
     writer.stop()
+
+
+def test_rows_are_committed_every_flush_period_without_being_asked(tmp_path: Path) -> None:
+    # Rows put at a steady pace for 2 s with a 0.2 s flush period: about ten commits. The default
+    # period (1 s) would give 2-3, a writer that commits only when asked none. (Commits late under
+    # load lower the count; 4 leaves room for that and still tells 0.2 s from 1 s.)
+    database = Database(StorageSettings.sqlite(tmp_path / "s.sqlite"))
+    writer = BatchWriter(database, name="periodic-writer", flush_period=0.2)
+    writer.register(Notes())
+    assert writer.start() is None
+    try:
+        started = time.monotonic()
+        number = 0
+        while time.monotonic() - started < 2.0:
+            writer.put("notes", [(number, "n")])
+            number += 1
+            time.sleep(0.01)
+        deadline = time.monotonic() + 10.0
+        while writer.stats.rows_written < number:  # the last rows: within a period or two, no flush asked
+            assert time.monotonic() < deadline, f"{writer.stats.rows_written} of {number} rows committed 10 s later"
+            time.sleep(0.02)
+        assert writer.stats.transactions >= 4, f"{writer.stats.transactions} commits in 2 s with a 0.2 s flush period"
+    finally:
+        writer.stop()
+    assert len(stored(database)) == number
 
 
 def test_a_failed_transaction_keeps_its_rows_for_the_next_flush(storage_settings: StorageSettings) -> None:

@@ -31,10 +31,12 @@ from softplc.storage.audit.queries import AuditQuery, search
 
 FLUSH = 0.25  # s
 # A commit takes its own time, and on a shared 2-core machine the child may wait for the CPU for
-# hundreds of ms (tests/adapters/history/test_history_durability.py measured up to 0.55 s at load 7): the bound
-# checked is the flush period plus this allowance. With the flush period wrongly at 2 s the loss
-# would be 2 s or more, far beyond it.
-COMMIT_ALLOWANCE = 0.5
+# hundreds of ms (tests/adapters/history/test_history_durability.py measured up to 0.55 s at load 7;
+# this test, on PostgreSQL in fresh-clone suite runs at load ~6, lost 1.08 s and 1.11 s): the bound
+# checked is the flush period plus this allowance. With the flush period wrongly at 2 s (or ignored
+# for the default 1 s) the loss is up to that period plus the commit: caught only when the kill comes
+# late in a period — tests/storage/test_storage_writer.py checks the period itself (commits counted).
+COMMIT_ALLOWANCE = 1.25
 
 
 def postgres_sessions(dsn: str, application: str, *, gone_within: float = 0.0) -> int:
