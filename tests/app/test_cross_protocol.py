@@ -133,7 +133,12 @@ async def test_a_program_output_is_readable_over_both_protocols(plant):
     while runtime.db.value("doubled") != -14.5:
         assert time.monotonic() < deadline, "the scan never produced doubled = -14.5"
         await asyncio.sleep(0.005)
-    over_opcua = await ua_client.get_node(opcua.node_id("doubled")).read_value()
+    # The address space follows the tag database through the OPC UA publisher, a push behind the
+    # scan (a Read right after the change may still see the old value): wait for it, 5 s at most.
+    node = ua_client.get_node(opcua.node_id("doubled"))
+    while (over_opcua := await node.read_value()) != -14.5:
+        assert time.monotonic() < deadline, f"OPC UA reads doubled = {over_opcua}, the tag database -14.5"
+        await asyncio.sleep(0.005)
     registers = (await mb.read_input_registers(modbus.map.by_tag["doubled"].address, count=4)).registers
     assert over_opcua == value_of("d", registers) == -14.5
     # a value the scan rewrites every cycle: both protocols follow it
