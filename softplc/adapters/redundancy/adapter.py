@@ -98,6 +98,7 @@ class RedundancyAdapter:
         # Nothing runs as active before the coordinator says so.
         plant.role.set(RoleTerm(PlantRole.STANDBY, 0, detail=f"this runtime ({me.name}) is starting as a member of a "
                                                                "redundant pair and has no role yet: write to the active"))
+        await self.coordinator.prepare()  # not on the event loop at the first campaign, under the other adapters' feet
         host, port = me.listen_address
         try:
             await self.server.start(host, port)

@@ -14,8 +14,10 @@ Every call has a timeout well under the lease, and a failing endpoint gives way 
 from __future__ import annotations
 
 import asyncio
+import importlib
 import json
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,6 +36,7 @@ class Holder:
     epoch: int
     value: dict[str, Any]
     lease: int
+    asked: float = 0.0  # mine: the clock time the lease was asked for (etcd counts it from later), where the term counts from
 
 
 class Coordinator:
@@ -47,6 +50,10 @@ class Coordinator:
         self._index = 0
         self._client: Any = None
         self._lease: Any = None
+
+    async def prepare(self) -> None:
+        """Import the etcd client (gRPC: a tenth of a second, seconds on a busy machine) off the event loop."""
+        await asyncio.to_thread(importlib.import_module, "aetcd")
 
     async def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
         """Call a client method on the current endpoint, trying each endpoint once; raises CoordinatorUnreachable."""
@@ -85,17 +92,20 @@ class Coordinator:
     def _describe(self) -> str:
         return ", ".join(f"{host}:{port}" for host, port in self.endpoints)
 
-    async def campaign(self, value: dict[str, Any]) -> Holder:
+    async def campaign(self, value: dict[str, Any], now: Callable[[], float]) -> Holder:
         """Create the key with a fresh lease unless someone holds it; returns the holder (maybe us).
 
         Who holds it is asked first (one cheap read a poll); only when nobody does is a lease
         granted and the key created — in one transaction, so of two members trying at once one wins.
+        `now` stamps the moment the lease is asked for (`Holder.asked`): the read before it may
+        have taken its time (a busy machine), and that time is not the lease's.
         """
         held = await self.look()
         if held is not None:
             return held
         from aetcd.client import Transactions
 
+        asked = now()
         lease = await self._call("lease", self.lease_seconds)
         transactions = Transactions()
         succeeded, responses = await self._call(
@@ -106,7 +116,7 @@ class Coordinator:
         )
         if succeeded:
             self._lease = lease
-            return Holder(True, int(responses[0].response_put.header.revision), value, int(lease.id))
+            return Holder(True, int(responses[0].response_put.header.revision), value, int(lease.id), asked)
         try:  # the other member was quicker: this lease holds nothing
             await self._call("revoke_lease", lease.id)
         except CoordinatorUnreachable:

@@ -64,14 +64,14 @@ async def stand_by(adapter: RedundancyAdapter, grace: float = 0.0) -> None:
         while True:
             sent = clock.now()
             try:
-                holder = await (adapter.coordinator.campaign(adapter.announcement()) if sent >= campaign_from
+                holder = await (adapter.coordinator.campaign(adapter.announcement(), clock.now) if sent >= campaign_from
                                 else adapter.coordinator.look())
                 adapter.coordinator_answered(True)
             except CoordinatorUnreachable as error:
                 adapter.coordinator_answered(False, str(error))
                 holder = None
             if holder is not None and holder.mine:
-                take_over(adapter, holder, sent)
+                take_over(adapter, holder, holder.asked)
                 return
             if holder is None and following and adapter.coordinator_ok:
                 log.info("redundancy: the active's key is gone (its lease ended); %s campaigns", adapter.settings.me.name)
@@ -114,7 +114,9 @@ async def follow(adapter: RedundancyAdapter, active: str) -> None:
 
 
 def take_over(adapter: RedundancyAdapter, holder: Holder, sent: float) -> None:
-    """This member holds the key: resume the active's journal and become ACTIVE with the new epoch."""
+    """This member holds the key: resume the active's journal and become ACTIVE with the new epoch.
+
+    `sent`: when its lease was asked for — the term ends a margin before the lease can."""
     plant = adapter.plant
     resumed = plant.replication.take_over() if adapter.mirrored else 0
     settings = adapter.settings

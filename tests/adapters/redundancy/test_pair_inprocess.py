@@ -80,3 +80,33 @@ async def test_when_the_active_stops_the_standby_takes_over_at_once_and_carries_
     await until(lambda: b.db.value("scans") > scans + 10, 2, "b scans")
     assert b.db.value("setpoint") == 4.5 and b.db.value("edges") == 1  # no false edge of `part`
     assert b.db.value("_sys.redundancy.failovers") == 1 and b.db.value("_sys.redundancy.epoch") > a.db.value("_sys.redundancy.epoch")
+
+
+async def test_a_member_whose_loop_stalls_before_it_asks_for_the_lease_is_not_fenced_by_the_stall(
+        tmp_path: Path, etcd: Any, caplog: pytest.LogCaptureFixture) -> None:
+    # The event loop held up for longer than the lease (3 s) between the look at who holds the key
+    # and the request for a lease (another adapter's start writing to a disk under load did this in
+    # a suite run): the lease counts from its request, so the term does too — a member that counted
+    # it from before the stall took over with a term already over, fenced at once.
+    path = write_pair(tmp_path, etcd.endpoint)
+    a = member(path, "a", tmp_path)
+    coordinator = next(adapter for adapter in a.adapters if adapter.name == "redundancy").coordinator
+    look = coordinator.look
+    stalled = []
+
+    async def stalling_look() -> Any:
+        held = await look()
+        if not stalled:
+            stalled.append(True)
+            time.sleep(3.5)  # the whole loop, as a blocking call in another adapter would
+        return held
+
+    coordinator.look = stalling_look
+    await a.start()
+    try:
+        await until(lambda: role(a) == "ACTIVE", 10, "a active")
+        await until(lambda: a.tasks[0].stats.cycles > 20, 5, "a scans")
+        assert stalled
+        assert not [record for record in caplog.records if "lapsed" in record.getMessage()]
+    finally:
+        await a.stop()
