@@ -12,6 +12,12 @@
 
 const { OPCUAClient, MessageSecurityMode, SecurityPolicy, AttributeIds } = require("node-opcua-client");
 
+// Every call has a deadline: a request to a server killed under it, or a connection that a loaded
+// machine makes slowly, must not keep the loop (or, at the end, the process) from going on.
+function within(ms, promise) {
+    return Promise.race([promise, new Promise((_, no) => setTimeout(() => no(new Error("timeout")), ms).unref())]);
+}
+
 async function session(endpoint) {
     const client = OPCUAClient.create({
         applicationName: "softplc-redundancy-follow",
@@ -37,18 +43,23 @@ async function main() {
         for (const endpoint of endpoints) {
             try {
                 if (!sessions[endpoint]) {
-                    sessions[endpoint] = await Promise.race([session(endpoint), new Promise((_, no) => setTimeout(() => no(new Error("timeout")), 1500))]);
+                    const opening = session(endpoint);
+                    try {
+                        sessions[endpoint] = await within(1500, opening);
+                    } catch (error) {  // too slow: a session opened after all is closed, not left to hold the process
+                        opening.then((late) => late.client.disconnect().catch(() => {}), () => {});
+                        throw error;
+                    }
                 }
                 const { session: s } = sessions[endpoint];
                 if (!seen.redundancy[endpoint]) {
-                    const [support, uris] = await s.read([
+                    const [support, uris] = await within(1000, s.read([
                         { nodeId: "ns=0;i=3709", attributeId: AttributeIds.Value },
                         { nodeId: "ns=0;i=11314", attributeId: AttributeIds.Value },
-                    ]);
+                    ]));
                     seen.redundancy[endpoint] = { support: support.value.value, uris: uris.value.value };
                 }
-                const level = await Promise.race([s.read({ nodeId: "ns=0;i=2267", attributeId: AttributeIds.Value }),
-                    new Promise((_, no) => setTimeout(() => no(new Error("timeout")), 1000))]);
+                const level = await within(1000, s.read({ nodeId: "ns=0;i=2267", attributeId: AttributeIds.Value }));
                 levels[endpoint] = level.value.value;
             } catch (error) {
                 levels[endpoint] = 0;
@@ -64,8 +75,8 @@ async function main() {
             let scans = null;
             if (chosen) {
                 try {
-                    const ns = (await sessions[chosen].session.readNamespaceArray()).indexOf("urn:softplc:tags");
-                    scans = (await sessions[chosen].session.read({ nodeId: `ns=${ns};s=scans`, attributeId: AttributeIds.Value })).value.value;
+                    const ns = (await within(1000, sessions[chosen].session.readNamespaceArray())).indexOf("urn:softplc:tags");
+                    scans = (await within(1000, sessions[chosen].session.read({ nodeId: `ns=${ns};s=scans`, attributeId: AttributeIds.Value }))).value.value;
                 } catch (error) { scans = null; }
             }
             const line = { at: Date.now(), using: chosen, levels, scans };
@@ -76,9 +87,10 @@ async function main() {
     }
     process.stdout.write(`RESULT ${JSON.stringify(seen)}\n`);
     for (const { client, session: s } of Object.values(sessions)) {
-        await s.close().catch(() => {});
-        await client.disconnect().catch(() => {});
+        await within(2000, s.close()).catch(() => {});
+        await within(2000, client.disconnect()).catch(() => {});
     }
 }
 
-main().catch((error) => { process.stderr.write(`${error.stack || error}\n`); process.exit(1); });
+// The result is printed; whatever a dead server's connection still holds open does not keep the process.
+main().then(() => process.exit(0), (error) => { process.stderr.write(`${error.stack || error}\n`); process.exit(1); });
