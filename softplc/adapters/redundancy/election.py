@@ -63,8 +63,12 @@ async def stand_by(adapter: RedundancyAdapter, grace: float = 0.0) -> None:
     try:
         while True:
             sent = clock.now()
+            # Not before every adapter of this runtime has started: one that holds the event loop
+            # while it starts (a journal created on a slow disk) would hold up the new lease's
+            # first renewal as well — the lease could end before this member ever renewed it.
+            campaigning = sent >= campaign_from and plant.state != "STARTING"
             try:
-                holder = await (adapter.coordinator.campaign(adapter.announcement(), clock.now) if sent >= campaign_from
+                holder = await (adapter.coordinator.campaign(adapter.announcement(), clock.now) if campaigning
                                 else adapter.coordinator.look())
                 adapter.coordinator_answered(True)
             except CoordinatorUnreachable as error:
