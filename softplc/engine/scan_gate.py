@@ -14,6 +14,7 @@ work runs inline on the event loop and no cycle can be due meanwhile).
 from __future__ import annotations
 
 import contextlib
+import math
 import sys
 import threading
 import time
@@ -42,6 +43,7 @@ class ScanGate:
         self._ran = threading.Event()
         self._watching = 0  # threads inside worker() or stepping()
         self._open_until = 0.0  # time.monotonic() until which no release is near
+        self._not_coming = math.nan  # a release waited for in vain: not waited for again
         engine.after_cycle(self._cycle_ran)  # registered on the loop's thread, once
 
     def _cycle_ran(self, task: Task) -> None:
@@ -91,6 +93,12 @@ class ScanGate:
             return
         now = self.clock.now()
         release = self._next_release()
+        if release == self._not_coming:
+            # That cycle did not come (the engine stopped, or a cycle is stalled): do not wait for it
+            # at every call again — an import of a module would take minutes. Looked at anew a
+            # LONGEST_WAIT later: a scan that runs again moves the release, and the gate works again.
+            self._open_until = monotonic() + LONGEST_WAIT
+            return
         margin = self._margin()
         if release - now > margin:
             self._open_until = monotonic() + (release - now - margin)  # the worker's own time base
@@ -105,6 +113,7 @@ class ScanGate:
                 break
             left = give_up - time.monotonic()
             if left <= 0:
+                self._not_coming = release
                 break
             self._ran.wait(left)
         self._open_until = 0.0
