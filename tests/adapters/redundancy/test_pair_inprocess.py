@@ -103,7 +103,7 @@ async def test_a_member_whose_loop_stalls_before_it_asks_for_the_lease_is_not_fe
         held = await look()
         if not stalled and a.state.value == "RUNNING":  # the look before the campaign's request for a lease
             stalled.append(True)
-            time.sleep(3.5)  # the whole loop, as a blocking call in another adapter would
+            time.sleep(3.5)  # noqa: ASYNC251 — the whole loop, as a blocking call in another adapter would
         return held
 
     coordinator.look = stalling_look
