@@ -148,6 +148,19 @@ def split_reference(reference: str) -> tuple[str, str]:
     return module_name, class_name
 
 
+def _interruption(error: BaseException) -> BaseException | None:
+    """A Ctrl-C (or an exit) that Python wrapped while importing: a KeyboardInterrupt in `__set_name__`
+    comes out as "RuntimeError: Error calling __set_name__" on Python 3.11, the interrupt its cause."""
+    seen: set[int] = set()
+    cause: BaseException | None = error
+    while cause is not None and id(cause) not in seen:
+        if not isinstance(cause, Exception):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return None
+
+
 def import_program(reference: str, base_dir: Path, load_module: ModuleLoader | None = None) -> type[Program]:
     """Resolve `module:Class`, `module.Class` or `file.py:Class` to a Program subclass.
 
@@ -168,6 +181,9 @@ def import_program(reference: str, base_dir: Path, load_module: ModuleLoader | N
     except SyntaxError as error:  # IndentationError and TabError too
         raise ImportError(f"cannot load program '{reference}': {syntax_error_at(error)}") from None
     except Exception as error:  # user code may raise anything while importing
+        interrupted = _interruption(error)
+        if interrupted is not None:
+            raise interrupted from None  # a Ctrl-C during the import is the user's, not the module's fault
         raise ImportError(f"cannot load program '{reference}': {type(error).__name__}: {error}{raised_at(error)}") from None
     cls = getattr(module, class_name, None)
     if cls is None:

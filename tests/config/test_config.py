@@ -243,3 +243,25 @@ def test_every_shipped_plant_and_scenario_writes_each_output_from_one_program_or
     for path in paths:
         scenario = load_scenario(path)
         build_plant(scenario, [[1] * len(scenario.tasks) for _ in scenario.robots])
+
+
+def test_a_ctrl_c_while_a_program_module_is_imported_stays_a_ctrl_c(make_config, tmp_path) -> None:
+    # Python 3.11 wraps an exception raised in a descriptor's __set_name__ (softplc's InOut) in
+    # "RuntimeError: Error calling __set_name__": a Ctrl-C at that moment read as a broken program
+    # (exit status 2, "cannot load program") in a suite run of the Ctrl-C-at-start-up test.
+    (tmp_path / "interrupted.py").write_text(
+        "from softplc.core.program import Program\n\n\n"
+        "class Named:\n"
+        "    def __set_name__(self, owner, name):\n"
+        "        raise KeyboardInterrupt\n\n\n"
+        "class Interrupted(Program):\n"
+        "    field = Named()\n")
+    with pytest.raises(KeyboardInterrupt):
+        make_config("""
+            version: 1
+            tasks:
+              fast:
+                interval: 10ms
+                programs:
+                  - {name: p, program: "interrupted.py:Interrupted"}
+        """)
