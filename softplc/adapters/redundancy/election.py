@@ -75,7 +75,7 @@ async def stand_by(adapter: RedundancyAdapter, grace: float = 0.0) -> None:
                 adapter.coordinator_answered(False, str(error))
                 holder = None
             if holder is not None and holder.mine:
-                take_over(adapter, holder, holder.asked)
+                take_over(adapter, holder)
                 return
             if holder is None and following and adapter.coordinator_ok:
                 log.info("redundancy: the active's key is gone (its lease ended); %s campaigns", adapter.settings.me.name)
@@ -117,14 +117,14 @@ async def follow(adapter: RedundancyAdapter, active: str) -> None:
         await adapter.plant.clock.sleep(RECONNECT)
 
 
-def take_over(adapter: RedundancyAdapter, holder: Holder, sent: float) -> None:
+def take_over(adapter: RedundancyAdapter, holder: Holder) -> None:
     """This member holds the key: resume the active's journal and become ACTIVE with the new epoch.
 
-    `sent`: when its lease was asked for — the term ends a margin before the lease can."""
+    The term counts from when the lease was asked for (`holder.asked`) and ends a margin before the lease can."""
     plant = adapter.plant
     resumed = plant.replication.take_over() if adapter.mirrored else 0
     settings = adapter.settings
-    until = sent + settings.lease_seconds - margin(settings.lease_seconds)
+    until = holder.asked + settings.lease_seconds - margin(settings.lease_seconds)
     took_over = adapter.active_name not in ("", settings.me.name)
     plant.role.set(RoleTerm(PlantRole.ACTIVE, holder.epoch, until, active=settings.me.name))
     adapter.became_active(holder.epoch, took_over=took_over, resumed=resumed)

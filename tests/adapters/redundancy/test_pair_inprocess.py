@@ -16,6 +16,7 @@ import pytest
 from softplc.app.adapters import build_adapters
 from softplc.app.runtime import Runtime
 from softplc.config import load_config
+from softplc.core.plant_role import PlantRole
 from softplc.core.roles import Role
 from softplc.core.tagdb import Origin, Rule
 from tests.adapters.redundancy.pair_support import write_pair
@@ -107,11 +108,14 @@ async def test_a_member_whose_loop_stalls_before_it_asks_for_the_lease_is_not_fe
         return held
 
     coordinator.look = stalling_look
+    left_at_takeover: list[float] = []  # of each ACTIVE term, when it was given: how long it had to run
+    a.role.on_change(lambda term: left_at_takeover.append(term.until - a.clock.now()) if term.role is PlantRole.ACTIVE else None)
     await a.start()
     try:
         await until(lambda: role(a) == "ACTIVE", 10, "a active")
         await until(lambda: a.tasks[0].stats.cycles > 20, 5, "a scans")
         assert stalled
+        assert left_at_takeover and left_at_takeover[0] > 0, left_at_takeover  # not over before it began
         assert not [record for record in caplog.records if "lapsed" in record.getMessage()]
     finally:
         await a.stop()
